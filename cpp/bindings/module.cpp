@@ -1,0 +1,497 @@
+// The only C++ that knows Python. Long runs release the GIL and go in chunks of ~0.1 s so that
+// Ctrl-C and progress callbacks are served between chunks, never inside the step loop.
+#include <pybind11/functional.h>
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+
+#include <chrono>
+#include <cstring>
+
+#include "pelletdem/errors.hpp"
+#include "pelletdem/world.hpp"
+
+namespace py = pybind11;
+using namespace pelletdem;
+
+namespace {
+
+using Arr = py::array_t<double, py::array::c_style | py::array::forcecast>;
+
+Vec3 to_vec3(const std::vector<double>& v, const char* name) {
+  if (v.size() != 3) throw ParameterError(cat(name, " must have 3 components, got ", v.size()));
+  return Vec3(v[0], v[1], v[2]);
+}
+
+std::vector<Vec3> to_vec3_array(const py::handle& obj, const char* name) {
+  Arr a = Arr::ensure(obj);
+  if (!a) throw ParameterError(cat(name, " must be a numeric array of shape (N, 3)"));
+  if (a.ndim() != 2 || a.shape(1) != 3)
+    throw ParameterError(cat(name, " must have shape (N, 3), got ndim ", a.ndim()));
+  std::vector<Vec3> out(a.shape(0));
+  auto r = a.unchecked<2>();
+  for (py::ssize_t k = 0; k < a.shape(0); ++k) out[k] = Vec3(r(k, 0), r(k, 1), r(k, 2));
+  return out;
+}
+
+std::vector<double> to_vector(const py::handle& obj, const char* name) {
+  Arr a = Arr::ensure(obj);
+  if (!a) throw ParameterError(cat(name, " must be a numeric array of shape (N,)"));
+  if (a.ndim() != 1) throw ParameterError(cat(name, " must be one-dimensional, got ndim ", a.ndim()));
+  return std::vector<double>(a.data(), a.data() + a.shape(0));
+}
+
+py::array_t<double> copy_vec3(const std::vector<Vec3>& v) {
+  py::array_t<double> a({static_cast<py::ssize_t>(v.size()), static_cast<py::ssize_t>(3)});
+  if (!v.empty()) std::memcpy(a.mutable_data(), v.data(), v.size() * sizeof(Vec3));
+  return a;
+}
+
+template <class T>
+py::array_t<T> copy_vector(const std::vector<T>& v) {
+  py::array_t<T> a(static_cast<py::ssize_t>(v.size()));
+  if (!v.empty()) std::memcpy(a.mutable_data(), v.data(), v.size() * sizeof(T));
+  return a;
+}
+
+struct ViewHolder {
+  std::shared_ptr<int> counter;
+  py::object owner;
+};
+
+// A read-only numpy view of a particle array. While it lives the world refuses to add
+// particles (which would move the memory under it).
+template <class T>
+py::array view_of(World& w, const T* data, std::size_t n, std::size_t width, py::object owner) {
+  auto counter = w.view_counter();
+  ++*counter;
+  py::capsule base(new ViewHolder{counter, owner}, [](void* p) {
+    auto* h = static_cast<ViewHolder*>(p);
+    --*h->counter;
+    delete h;
+  });
+  py::array out;
+  const py::ssize_t N = static_cast<py::ssize_t>(n);
+  if (width == 1) {
+    out = py::array_t<double>({N}, {static_cast<py::ssize_t>(sizeof(double))},
+                              reinterpret_cast<const double*>(data), base);
+  } else {
+    out = py::array_t<double>({N, static_cast<py::ssize_t>(3)},
+                              {static_cast<py::ssize_t>(sizeof(Vec3)),
+                               static_cast<py::ssize_t>(sizeof(double))},
+                              reinterpret_cast<const double*>(data), base);
+  }
+  out.attr("flags").attr("writeable") = false;
+  return out;
+}
+
+// Runs the engine in chunks with the GIL released; returns (condition index, steps run).
+py::tuple run_chunked(World& w, std::vector<StopCondition> conds, long max_steps,
+                      const py::object& progress) {
+  if (max_steps < 0) throw ParameterError(cat("max_steps = ", max_steps, " must be >= 0"));
+  // "Steps" counts over the whole call, so it becomes the budget rather than a per-chunk test.
+  std::vector<int> index_map;
+  std::vector<StopCondition> inner;
+  long steps_limit = max_steps;
+  int steps_index = -1;
+  for (std::size_t k = 0; k < conds.size(); ++k) {
+    if (conds[k].kind == StopKind::Steps) {
+      if (!(conds[k].value >= 0)) throw ParameterError("stop condition steps must be >= 0");
+      if (static_cast<long>(conds[k].value) <= steps_limit) {
+        steps_limit = static_cast<long>(conds[k].value);
+        steps_index = static_cast<int>(k);
+      }
+    } else {
+      inner.push_back(conds[k]);
+      index_map.push_back(static_cast<int>(k));
+    }
+  }
+  long done = 0, chunk = 200;
+  while (true) {
+    const long this_chunk = std::min(chunk, steps_limit - done);
+    RunOutcome r;
+    double seconds = 0.0;
+    if (this_chunk > 0) {
+      py::gil_scoped_release release;
+      const auto t0 = std::chrono::steady_clock::now();
+      r = w.run_until(inner, this_chunk);
+      seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    }
+    done += r.steps;
+    if (PyErr_CheckSignals() != 0) throw py::error_already_set();
+    if (!progress.is_none()) progress(done);
+    if (r.condition >= 0) return py::make_tuple(index_map[r.condition], done);
+    if (done >= steps_limit) return py::make_tuple(done >= max_steps && steps_index < 0 ? -1 : steps_index, done);
+    // Aim for ~0.1 s per chunk so an interrupt is served well within a second.
+    if (seconds > 0.0) chunk = std::clamp(static_cast<long>(this_chunk * 0.1 / seconds), 1L, 1000000L);
+    else chunk = std::min(chunk * 4, 1000000L);
+  }
+}
+
+}  // namespace
+
+PYBIND11_MODULE(_core, m) {
+  m.doc() = "pelletdem's C++ engine: DEM with the linear hysteretic adhesive contact law and "
+            "parallel bonds. Use the Python layer (pelletdem) rather than this module directly.";
+
+  auto param_err = py::register_exception<ParameterError>(m, "ParameterError", PyExc_ValueError);
+  auto sim_err = py::register_exception<SimulationError>(m, "SimulationError", PyExc_RuntimeError);
+  py::register_exception<ParticleEscapedError>(m, "ParticleEscapedError", sim_err.ptr());
+  py::register_exception<OverlapError>(m, "OverlapError", sim_err.ptr());
+  py::register_exception<NonFiniteError>(m, "NonFiniteError", sim_err.ptr());
+  (void)param_err;
+
+  py::class_<ContactLawParams>(m, "ContactLawParams")
+      .def(py::init<>())
+      .def_readwrite("k1", &ContactLawParams::k1)
+      .def_readwrite("k2", &ContactLawParams::k2)
+      .def_readwrite("kc", &ContactLawParams::kc)
+      .def_readwrite("kt_ratio", &ContactLawParams::kt_ratio)
+      .def_readwrite("mu", &ContactLawParams::mu)
+      .def_readwrite("mu_wall", &ContactLawParams::mu_wall)
+      .def_readwrite("rolling", &ContactLawParams::rolling)
+      .def_readwrite("normal_damping_ratio", &ContactLawParams::normal_damping_ratio)
+      .def_readwrite("scale_with_radius", &ContactLawParams::scale_with_radius)
+      .def_readwrite("r_ref", &ContactLawParams::r_ref)
+      .def_readwrite("hardening", &ContactLawParams::hardening)
+      .def_readwrite("hardening_exponent", &ContactLawParams::hardening_exponent)
+      .def("restitution", &ContactLawParams::restitution)
+      .def("validate", &ContactLawParams::validate);
+
+  py::class_<BondParams>(m, "BondParams")
+      .def(py::init<>())
+      .def_readwrite("radius", &BondParams::radius)
+      .def_readwrite("youngs_modulus", &BondParams::youngs_modulus)
+      .def_readwrite("kt_ratio", &BondParams::kt_ratio)
+      .def_readwrite("sigma_c", &BondParams::sigma_c)
+      .def_readwrite("tau_c", &BondParams::tau_c)
+      .def_readwrite("gap_tolerance", &BondParams::gap_tolerance)
+      .def("validate", &BondParams::validate);
+
+  py::class_<WorldParams>(m, "WorldParams")
+      .def(py::init<>())
+      .def_readwrite("dt", &WorldParams::dt)
+      .def_property("gravity", [](const WorldParams& p) { return std::vector<double>{p.gravity.x(), p.gravity.y(), p.gravity.z()}; },
+                    [](WorldParams& p, const std::vector<double>& g) { p.gravity = to_vec3(g, "gravity"); })
+      .def_readwrite("density", &WorldParams::density)
+      .def_readwrite("density_scale", &WorldParams::density_scale)
+      .def_readwrite("skin", &WorldParams::skin)
+      .def_property("box_lo", [](const WorldParams& p) { return std::vector<double>{p.box.lo.x(), p.box.lo.y(), p.box.lo.z()}; },
+                    [](WorldParams& p, const std::vector<double>& g) { p.box.lo = to_vec3(g, "box_lo"); })
+      .def_property("box_hi", [](const WorldParams& p) { return std::vector<double>{p.box.hi.x(), p.box.hi.y(), p.box.hi.z()}; },
+                    [](WorldParams& p, const std::vector<double>& g) { p.box.hi = to_vec3(g, "box_hi"); })
+      .def_readwrite("threads", &WorldParams::threads)
+      .def_readwrite("max_overlap_ratio", &WorldParams::max_overlap_ratio)
+      .def_readwrite("sample_interval", &WorldParams::sample_interval)
+      .def_readwrite("contact", &WorldParams::contact);
+
+  py::enum_<StopKind>(m, "StopKind")
+      .value("Time", StopKind::Time)
+      .value("Steps", StopKind::Steps)
+      .value("KineticEnergyBelow", StopKind::KineticEnergyBelow)
+      .value("WallForceAbove", StopKind::WallForceAbove)
+      .value("WallForceBelow", StopKind::WallForceBelow)
+      .value("WallTravelAbove", StopKind::WallTravelAbove)
+      .value("LoadMarkerAbove", StopKind::LoadMarkerAbove);
+
+  py::class_<StopCondition>(m, "StopCondition")
+      .def(py::init([](StopKind kind, double value, int wall, long check_interval) {
+             return StopCondition{kind, value, wall, check_interval};
+           }),
+           py::arg("kind"), py::arg("value"), py::arg("wall") = -1, py::arg("check_interval") = 1)
+      .def_readonly("kind", &StopCondition::kind)
+      .def_readonly("value", &StopCondition::value)
+      .def_readonly("wall", &StopCondition::wall)
+      .def_readonly("check_interval", &StopCondition::check_interval);
+
+  py::class_<World>(m, "World")
+      .def(py::init<const WorldParams&>(), py::arg("params"))
+      .def("clone", &World::clone)
+      .def("add_particles",
+           [](World& w, const py::object& x, const py::object& r) {
+             w.add_particles(to_vec3_array(x, "positions"), to_vector(r, "radii"));
+           },
+           py::arg("positions"), py::arg("radii"))
+      .def("add_plane",
+           [](World& w, const std::string& name, const std::vector<double>& point,
+              const std::vector<double>& normal) {
+             return w.add_plane(name, to_vec3(point, "point"), to_vec3(normal, "normal"));
+           },
+           py::arg("name"), py::arg("point"), py::arg("normal"))
+      .def("add_cylinder",
+           [](World& w, const std::string& name, const std::vector<double>& axis_point, double radius) {
+             return w.add_cylinder(name, to_vec3(axis_point, "axis_point"), radius);
+           },
+           py::arg("name"), py::arg("axis_point"), py::arg("radius"))
+      .def_property_readonly("wall_count", &World::wall_count)
+      .def("wall_name", [](const World& w, int k) { return w.wall(k).name; })
+      .def("wall_kind", [](const World& w, int k) { return w.wall(k).kind == WallKind::Plane ? "plane" : "cylinder"; })
+      .def("set_wall_velocity",
+           [](World& w, int k, const std::vector<double>& v) {
+             Vec3 vv = to_vec3(v, "velocity");
+             if (!vv.allFinite()) throw ParameterError("wall velocity must be finite (m/s)");
+             w.wall(k).velocity = vv;
+             w.wall(k).servo = false;
+           })
+      .def("set_wall_radius_rate",
+           [](World& w, int k, double rate) {
+             if (!std::isfinite(rate)) throw ParameterError("radius_rate must be finite (m/s)");
+             if (w.wall(k).kind != WallKind::Cylinder) throw ParameterError("radius_rate applies to cylinders only");
+             w.wall(k).radius_rate = rate;
+           })
+      .def("set_wall_servo",
+           [](World& w, int k, double force, double gain, double max_speed) {
+             Wall& wl = w.wall(k);
+             if (wl.kind != WallKind::Plane) throw ParameterError("a servo drives planes only");
+             wl.servo = true;
+             wl.servo_force = force;
+             wl.servo_gain = gain;
+             wl.servo_max_speed = max_speed;
+             try { wl.validate(); } catch (...) { wl.servo = false; throw; }
+           })
+      .def("set_wall_active", [](World& w, int k, bool a) { w.wall(k).active = a; w.invalidate(); })
+      .def("set_wall_point",
+           [](World& w, int k, const std::vector<double>& p) { w.wall(k).point = to_vec3(p, "point"); w.invalidate(); })
+      .def("set_wall_radius",
+           [](World& w, int k, double r) {
+             require_positive("cylinder radius", r, "m");
+             w.wall(k).radius = r;
+             w.invalidate();
+           })
+      .def("wall_state",
+           [](const World& w, int k) {
+             const Wall& wl = w.wall(k);
+             py::dict d;
+             d["name"] = wl.name;
+             d["kind"] = wl.kind == WallKind::Plane ? "plane" : "cylinder";
+             d["point"] = std::vector<double>{wl.point.x(), wl.point.y(), wl.point.z()};
+             d["normal"] = std::vector<double>{wl.normal.x(), wl.normal.y(), wl.normal.z()};
+             d["radius"] = wl.radius;
+             d["velocity"] = std::vector<double>{wl.velocity.x(), wl.velocity.y(), wl.velocity.z()};
+             d["radius_rate"] = wl.radius_rate;
+             d["force"] = std::vector<double>{wl.force.x(), wl.force.y(), wl.force.z()};
+             d["torque"] = std::vector<double>{wl.torque.x(), wl.torque.y(), wl.torque.z()};
+             d["normal_force"] = wl.normal_force();
+             d["travel"] = wl.travel;
+             d["active"] = wl.active;
+             d["max_overlap_ratio"] = wl.max_overlap_ratio;
+             d["contacts"] = wl.contacts.size();
+             return d;
+           })
+      .def("set_contact_params", &World::set_contact_params)
+      .def_property_readonly("contact_params", [](const World& w) { return w.params().contact; })
+      .def_property("dt", [](const World& w) { return w.params().dt; }, &World::set_dt)
+      .def_property("threads", [](const World& w) { return w.params().threads; }, &World::set_threads)
+      .def_property("gravity",
+                    [](const World& w) { const Vec3& g = w.params().gravity; return std::vector<double>{g.x(), g.y(), g.z()}; },
+                    [](World& w, const std::vector<double>& g) { w.set_gravity(to_vec3(g, "gravity")); })
+      .def_property_readonly("density_scale", [](const World& w) { return w.params().density_scale; })
+      .def_property_readonly("density", [](const World& w) { return w.params().density; })
+      .def("set_load_walls", &World::set_load_walls)
+      .def("set_adhesion_ramp", &World::set_adhesion_ramp, py::arg("t_start"), py::arg("duration"))
+      .def_property_readonly("adhesion_scale", &World::adhesion_scale)
+      .def("set_max_overlap_ratio", &World::set_max_overlap_ratio)
+      .def("set_sample_interval", &World::set_sample_interval)
+      .def("run_until", &run_chunked, py::arg("conditions"), py::arg("max_steps"),
+           py::arg("progress") = py::none())
+      .def("step", [](World& w) { py::gil_scoped_release r; w.step(); })
+      .def_property_readonly("time", &World::time)
+      .def_property_readonly("step_count", &World::step_count)
+      .def_property_readonly("n", [](const World& w) { return w.particles().size(); })
+      .def("kinetic_energy", [](const World& w) { return w.kinetic_energy(); })
+      .def("potential_energy", [](const World& w) { return w.potential_energy(); })
+      .def("coordination_number", &World::coordination_number)
+      .def_property_readonly("contact_count", &World::contact_count)
+      .def_property_readonly("max_overlap_ratio_seen", &World::max_overlap_ratio_seen)
+      .def("reset_max_overlap_seen", &World::reset_max_overlap_seen)
+      .def_property_readonly("load_marker", &World::load_marker)
+      .def("critical_time_step", &World::critical_time_step)
+      .def_property_readonly("rebuild_count", &World::rebuild_count)
+      .def_property_readonly("pair_list_size", [](const World& w) { return w.neighbors().pair_count(); })
+      // Read-only zero-copy views.
+      .def_property_readonly("x", [](py::object self) { World& w = self.cast<World&>(); return view_of(w, w.particles().x.data(), w.particles().size(), 3, self); })
+      .def_property_readonly("v", [](py::object self) { World& w = self.cast<World&>(); return view_of(w, w.particles().v.data(), w.particles().size(), 3, self); })
+      .def_property_readonly("w", [](py::object self) { World& w = self.cast<World&>(); return view_of(w, w.particles().w.data(), w.particles().size(), 3, self); })
+      .def_property_readonly("f", [](py::object self) { World& w = self.cast<World&>(); return view_of(w, w.particles().f.data(), w.particles().size(), 3, self); })
+      .def_property_readonly("t", [](py::object self) { World& w = self.cast<World&>(); return view_of(w, w.particles().t.data(), w.particles().size(), 3, self); })
+      .def_property_readonly("r", [](py::object self) { World& w = self.cast<World&>(); return view_of(w, w.particles().r.data(), w.particles().size(), 1, self); })
+      .def_property_readonly("m", [](py::object self) { World& w = self.cast<World&>(); return view_of(w, w.particles().m.data(), w.particles().size(), 1, self); })
+      .def("set_velocities",
+           [](World& w, const py::object& v, const py::object& omega) {
+             auto vv = to_vec3_array(v, "velocities");
+             auto ww = to_vec3_array(omega, "angular velocities");
+             auto& p = w.particles();
+             if (vv.size() != p.size() || ww.size() != p.size())
+               throw ParameterError(cat("velocities must have shape (", p.size(), ", 3)"));
+             for (auto& x : vv) if (!x.allFinite()) throw ParameterError("velocities must be finite");
+             for (auto& x : ww) if (!x.allFinite()) throw ParameterError("angular velocities must be finite");
+             p.v = vv;
+             p.w = ww;
+             w.invalidate();
+           })
+      .def("set_positions",
+           [](World& w, const py::object& x) {
+             auto xx = to_vec3_array(x, "positions");
+             auto& p = w.particles();
+             if (xx.size() != p.size()) throw ParameterError(cat("positions must have shape (", p.size(), ", 3)"));
+             for (auto& q : xx) if (!q.allFinite()) throw ParameterError("positions must be finite");
+             p.x = xx;
+             w.invalidate();
+           })
+      .def("contacts",
+           [](const World& w) {
+             std::vector<Index> i, j;
+             std::vector<double> ov, fn;
+             w.contacts(i, j, ov, fn);
+             py::dict d;
+             d["i"] = copy_vector(i);
+             d["j"] = copy_vector(j);
+             d["overlap"] = copy_vector(ov);
+             d["fn"] = copy_vector(fn);
+             return d;
+           })
+      .def("samples",
+           [](const World& w) {
+             const auto& s = w.samples();
+             const std::size_t n = s.size();
+             std::vector<double> t(n), ke(n), cn(n), ov(n), lm(n), nc(n), nbi(n), nbb(n);
+             for (std::size_t k = 0; k < n; ++k) {
+               t[k] = s[k].time; ke[k] = s[k].kinetic_energy; cn[k] = s[k].coordination_number;
+               ov[k] = s[k].max_overlap_ratio; lm[k] = s[k].load_marker; nc[k] = s[k].n_contacts;
+               nbi[k] = s[k].n_bonds_intact; nbb[k] = s[k].n_bonds_broken;
+             }
+             py::dict d;
+             d["time"] = copy_vector(t);
+             d["kinetic_energy"] = copy_vector(ke);
+             d["coordination_number"] = copy_vector(cn);
+             d["max_overlap_ratio"] = copy_vector(ov);
+             d["load_marker"] = copy_vector(lm);
+             d["n_contacts"] = copy_vector(nc);
+             d["n_bonds_intact"] = copy_vector(nbi);
+             d["n_bonds_broken"] = copy_vector(nbb);
+             return d;
+           })
+      .def("wall_samples",
+           [](const World& w, int k) {
+             if (k < 0 || k >= w.wall_count()) throw ParameterError(cat("wall index ", k, " out of range 0..", w.wall_count() - 1));
+             const auto& s = w.wall_samples(k);
+             const std::size_t n = s.size();
+             std::vector<double> t(n), fn(n), rad(n), tr(n);
+             std::vector<Vec3> f(n), pt(n);
+             for (std::size_t q = 0; q < n; ++q) {
+               t[q] = s[q].time; fn[q] = s[q].normal_force; rad[q] = s[q].radius; tr[q] = s[q].travel;
+               f[q] = s[q].force; pt[q] = s[q].point;
+             }
+             py::dict d;
+             d["time"] = copy_vector(t);
+             d["force"] = copy_vec3(f);
+             d["normal_force"] = copy_vector(fn);
+             d["point"] = copy_vec3(pt);
+             d["radius"] = copy_vector(rad);
+             d["travel"] = copy_vector(tr);
+             return d;
+           })
+      .def("clear_samples", &World::clear_samples)
+      .def("record_sample", &World::record_sample)
+      .def("create_bonds", [](World& w, const BondParams& p) { py::gil_scoped_release r; return w.create_bonds(p); })
+      .def_property_readonly("bond_count", [](const World& w) { return w.bonds().size(); })
+      .def("intact_bond_count", &World::intact_bond_count)
+      .def("bonds",
+           [](const World& w) {
+             const auto& b = w.bonds();
+             const std::size_t n = b.size();
+             std::vector<Index> i(n), j(n);
+             std::vector<std::uint8_t> mode(n);
+             std::vector<double> fn(n), mn(n), rad(n), kn(n), kt(n), sc(n), tc(n), sig(n), tau(n);
+             std::vector<Vec3> ft(n), mt(n);
+             for (std::size_t k = 0; k < n; ++k) {
+               i[k] = b[k].i; j[k] = b[k].j; mode[k] = static_cast<std::uint8_t>(b[k].mode);
+               fn[k] = b[k].fn; mn[k] = b[k].mn; ft[k] = b[k].ft; mt[k] = b[k].mt;
+               rad[k] = b[k].radius; kn[k] = b[k].kn; kt[k] = b[k].kt; sc[k] = b[k].sigma_c; tc[k] = b[k].tau_c;
+               sig[k] = b[k].sigma_max(); tau[k] = b[k].tau_max();
+             }
+             py::dict d;
+             d["i"] = copy_vector(i); d["j"] = copy_vector(j); d["mode"] = copy_vector(mode);
+             d["fn"] = copy_vector(fn); d["ft"] = copy_vec3(ft); d["mn"] = copy_vector(mn); d["mt"] = copy_vec3(mt);
+             d["radius"] = copy_vector(rad); d["kn"] = copy_vector(kn); d["kt"] = copy_vector(kt);
+             d["sigma_c"] = copy_vector(sc); d["tau_c"] = copy_vector(tc);
+             d["sigma_max"] = copy_vector(sig); d["tau_max"] = copy_vector(tau);
+             return d;
+           })
+      .def("set_bond_property",
+           [](World& w, const std::string& name, const py::object& values) {
+             auto v = to_vector(values, name.c_str());
+             auto& b = w.bonds_mut();
+             if (v.size() != b.size()) throw ParameterError(cat(name, " must have one value per bond (", b.size(), "), got ", v.size()));
+             for (std::size_t k = 0; k < v.size(); ++k)
+               if (!(v[k] > 0.0) || !std::isfinite(v[k]))
+                 throw ParameterError(cat(name, "[", k, "] = ", v[k], " must be finite and > 0"));
+             double Bond::*field = nullptr;
+             if (name == "radius") field = &Bond::radius;
+             else if (name == "kn") field = &Bond::kn;
+             else if (name == "kt") field = &Bond::kt;
+             else if (name == "sigma_c") field = &Bond::sigma_c;
+             else if (name == "tau_c") field = &Bond::tau_c;
+             else throw ParameterError(cat("unknown bond property '", name, "': allowed radius, kn, kt, sigma_c, tau_c"));
+             for (std::size_t k = 0; k < v.size(); ++k) b[k].*field = v[k];
+           })
+      .def("broken_bonds",
+           [](const World& w) {
+             const auto& b = w.broken_bonds();
+             const std::size_t n = b.size();
+             std::vector<double> t(n), sig(n), tau(n), lm(n);
+             std::vector<long> step(n);
+             std::vector<Index> i(n), j(n);
+             std::vector<std::uint8_t> mode(n);
+             std::vector<Vec3> pos(n);
+             for (std::size_t k = 0; k < n; ++k) {
+               t[k] = b[k].time; step[k] = b[k].step; i[k] = b[k].i; j[k] = b[k].j; pos[k] = b[k].position;
+               mode[k] = static_cast<std::uint8_t>(b[k].mode); sig[k] = b[k].sigma; tau[k] = b[k].tau; lm[k] = b[k].load_marker;
+             }
+             py::dict d;
+             d["time"] = copy_vector(t); d["step"] = copy_vector(step); d["i"] = copy_vector(i); d["j"] = copy_vector(j);
+             d["position"] = copy_vec3(pos); d["mode"] = copy_vector(mode); d["sigma"] = copy_vector(sig);
+             d["tau"] = copy_vector(tau); d["load_marker"] = copy_vector(lm);
+             return d;
+           });
+
+  m.def("truncated_normal_radii", &truncated_normal_radii, py::arg("n"), py::arg("mean"), py::arg("sd"),
+        py::arg("r_min"), py::arg("r_max"), py::arg("seed"),
+        "Radii (m) from a normal distribution truncated to [r_min, r_max], seeded.");
+  m.def("random_pack_cylinder",
+        [](const py::object& radii, double cx, double cy, double radius, double z_lo, double z_hi,
+           std::uint64_t seed, long max_attempts) {
+          std::vector<double> r = to_vector(radii, "radii");
+          std::vector<Vec3> x;
+          {
+            py::gil_scoped_release rel;
+            x = random_pack_cylinder(r, cx, cy, radius, z_lo, z_hi, seed, max_attempts);
+          }
+          return py::make_tuple(copy_vec3(x), copy_vector(r));
+        },
+        py::arg("radii"), py::arg("cx"), py::arg("cy"), py::arg("radius"), py::arg("z_lo"), py::arg("z_hi"),
+        py::arg("seed"), py::arg("max_attempts") = 100000,
+        "Random non-overlapping placement in a z-aligned cylinder; returns (positions, radii) sorted along z.");
+  m.def("brute_force_pairs",
+        [](const py::object& x, const py::object& r, double skin) {
+          Particles p;
+          auto xx = to_vec3_array(x, "positions");
+          auto rr = to_vector(r, "radii");
+          if (xx.size() != rr.size()) throw ParameterError("positions and radii must have the same length");
+          for (std::size_t k = 0; k < xx.size(); ++k) p.push(xx[k], rr[k], 1.0);
+          auto pairs = NeighborList::brute_force(p, skin);
+          std::vector<Index> i, j;
+          for (auto& q : pairs) { i.push_back(q.first); j.push_back(q.second); }
+          return py::make_tuple(copy_vector(i), copy_vector(j));
+        },
+        "Reference O(N^2) pair search (for tests): pairs closer than r_i + r_j + skin.");
+  m.def("neighbor_pairs",
+        [](const World& w) {
+          const NeighborList& nb = w.neighbors();
+          std::vector<Index> i, j;
+          for (std::size_t a = 0; a + 1 < nb.start.size(); ++a)
+            for (Index k = nb.start[a]; k < nb.start[a + 1]; ++k) { i.push_back(static_cast<Index>(a)); j.push_back(nb.j[k]); }
+          return py::make_tuple(copy_vector(i), copy_vector(j));
+        },
+        "The world's current neighbour pairs (i < j) as two arrays.");
+}

@@ -1,0 +1,52 @@
+#pragma once
+// Parallel bonds (Potyondy & Cundall 2004; the paper's eq. 12-15). Each bond carries its own
+// incremental force and moment, stored in the bond's frame which turns with the pair, so a
+// rigid rotation of a bonded pair creates no force. Bonds live in their own list, apart from
+// the contact table: they persist until they break, however far the pair moves apart.
+#include <cstdint>
+#include <vector>
+
+#include "pelletdem/vec.hpp"
+
+namespace pelletdem {
+
+struct BondParams {
+  double radius = 2.0e-5;          // r_b, m
+  double youngs_modulus = 120e6;   // E_b, Pa; k_n^b = E_b / (r_i + r_j) (eq. 13)
+  double kt_ratio = 1.0;           // k_t^b / k_n^b (the paper leaves it open; k_t = k_n)
+  double sigma_c = 36e6;           // tension strength, Pa
+  double tau_c = 36e6;             // shear strength, Pa
+  double gap_tolerance = 0.0;      // bond pairs whose surfaces are closer than this, m
+  void validate() const;
+};
+
+enum class BondMode : std::uint8_t { Intact = 0, Tension = 1, Shear = 2 };
+
+struct Bond {
+  Index i, j;
+  Vec3 n_prev;          // normal at the last update, for turning the stored vectors
+  double fn = 0.0;      // normal force on j along n, N (> 0 compression, < 0 tension)
+  Vec3 ft = Vec3::Zero();   // tangential force on j, N
+  double mn = 0.0;      // twisting moment on j about n, N m
+  Vec3 mt = Vec3::Zero();   // bending moment on j, N m
+  double radius, kn, kt, sigma_c, tau_c;  // per bond, so spreads of strength are possible
+  BondMode mode = BondMode::Intact;
+
+  double area() const { return kPi * radius * radius; }
+  double polar_moment() const { return 0.5 * kPi * radius * radius * radius * radius; }
+  // Maximum normal and shear stress of eq. 14, Pa.
+  double sigma_max() const { return -fn / area() + 2.0 * mt.norm() * radius / polar_moment(); }
+  double tau_max() const { return ft.norm() / area() + std::abs(mn) * radius / polar_moment(); }
+};
+
+struct BrokenBond {
+  double time;     // s
+  long step;
+  Index i, j;
+  Vec3 position;   // bond centre at breakage, m
+  BondMode mode;
+  double sigma, tau;  // stresses at breakage, Pa
+  double load_marker; // the world's load marker at breakage (e.g. plate displacement, m)
+};
+
+}  // namespace pelletdem

@@ -1,0 +1,160 @@
+#pragma once
+// The paper's contact law (section 3.1.1) as one small type: parameters plus pure functions
+// from (geometry, per-pair history, dt) to (force, new history). Walls and particle pairs use
+// the same law; only the effective radius and mass differ.
+#include <algorithm>
+#include <cmath>
+
+#include "pelletdem/errors.hpp"
+#include "pelletdem/vec.hpp"
+
+namespace pelletdem {
+
+// Per-contact history, kept in the contact table and carried across neighbour-list rebuilds.
+struct ContactHistory {
+  double delta0 = 0.0;        // residual (plastic) overlap delta_{n,0} of eq. 5, m
+  Vec3 ft = Vec3::Zero();     // stored tangential spring force on the second body, N (eq. 9)
+};
+
+struct ContactLawParams {
+  double k1 = 1.0e5;    // loading (plastic) stiffness, N/m (Table 4 mean)
+  double k2 = 4.0e5;    // unloading/reloading (elastic) stiffness, N/m
+  double kc = 600.0;    // adhesion stiffness, N/m
+  double kt_ratio = 1.0;  // k_t / k1: the paper sets k_t equal to the normal stiffness
+  double mu = 0.5;        // particle-particle friction coefficient
+  double mu_wall = 0.15;  // particle-wall friction coefficient
+  double rolling = 0.01;  // rolling friction coefficient m_r of eq. 11
+  // Optional viscous normal damping as a fraction of critical damping on k2. The paper has
+  // none (all normal dissipation is hysteretic); 0 keeps eq. 5 exact.
+  double normal_damping_ratio = 0.0;
+  // Stiffness scaling with size: when true, k1, k2, kc of a pair are the values above times
+  // 2 r* / r_ref (r* = ri rj / (ri + rj); r* = ri against a wall), so two spheres of radius
+  // r_ref get exactly k1, as eq. 7 makes stiffness proportional to radius. Off by default:
+  // Table 4 gives one mean value.
+  bool scale_with_radius = false;
+  double r_ref = 2.0e-4;  // reference radius for the scaling, m
+  // Hardening of the loading branch at large overlap (an optional effect for the residual
+  // above dh/h0 ~ 0.75): k1(delta) = k1 (1 + hardening (delta / r*)^hardening_exponent) where
+  // r* is the pair's equivalent radius. 0 switches it off.
+  double hardening = 0.0;
+  double hardening_exponent = 1.0;
+
+  double restitution() const { return std::sqrt(k1 / k2); }  // eq. 8
+
+  void validate() const {
+    require_positive("k1", k1, "N/m");
+    require_positive("k2", k2, "N/m");
+    if (k2 < k1)
+      throw ParameterError(cat("k2 = ", k2, " N/m is below k1 = ", k1,
+                               " N/m: the unloading stiffness must satisfy k2 >= k1 (e = sqrt(k1/k2) <= 1)"));
+    require_nonnegative("kc", kc, "N/m");
+    require_range("kt_ratio", kt_ratio, 0.0, 10.0);
+    require_range("mu", mu, 0.0, 10.0);
+    require_range("mu_wall", mu_wall, 0.0, 10.0);
+    require_range("rolling", rolling, 0.0, 1.0);
+    require_range("normal_damping_ratio", normal_damping_ratio, 0.0, 1.0);
+    require_positive("r_ref", r_ref, "m");
+    require_range("hardening", hardening, 0.0, 1.0e4);
+    require_range("hardening_exponent", hardening_exponent, 0.5, 4.0);
+  }
+};
+
+// Geometry and kinematics of one contact as the law sees it.
+struct ContactKinematics {
+  double delta;      // normal overlap, m (> 0 in contact)
+  double vn;         // relative normal velocity, m/s (> 0 separating)
+  Vec3 vt;           // relative tangential velocity of the second body, m/s
+  Vec3 n;            // unit normal from the first body to the second
+  double r_eff;      // equivalent radius r*, m
+  double m_eff;      // equivalent mass m*, kg
+};
+
+struct ContactForce {
+  double fn;         // normal force on the second body along n, N (> 0 repulsive)
+  Vec3 ft;           // tangential force on the second body, N
+};
+
+// Linear hysteretic spring with linear adhesion (eq. 5-8), incremental Coulomb friction with a
+// viscous term (eq. 9-10). Rolling friction (eq. 11) needs the bodies' spins, so the caller
+// applies it from fn.
+class HystereticLaw {
+ public:
+  explicit HystereticLaw(const ContactLawParams& p) : p_(p) {
+    const double lne = std::log(p.restitution());
+    // eq. 10's damping factor sqrt(4 / (1 + (pi / ln e)^2)); e = 1 means no damping.
+    damping_factor_ = (lne < 0.0) ? std::sqrt(4.0 / (1.0 + (kPi / lne) * (kPi / lne))) : 0.0;
+  }
+
+  const ContactLawParams& params() const { return p_; }
+
+  double stiffness_scale(double r_eff) const {
+    return p_.scale_with_radius ? 2.0 * r_eff / p_.r_ref : 1.0;
+  }
+
+  // Loading branch force at overlap delta (eq. 5 first line, with optional hardening).
+  double loading_force(double delta, double k1, double r_eff) const {
+    if (p_.hardening > 0.0)
+      return k1 * delta * (1.0 + p_.hardening * std::pow(delta / r_eff, p_.hardening_exponent));
+    return k1 * delta;
+  }
+
+  // Normal force of eq. 5; updates the residual overlap delta0 so the unloading line moves
+  // with the history (Walton-Braun with Luding's adhesive branch).
+  double normal_force(double delta, double& delta0, double r_eff, double adhesion_scale) const {
+    const double s = stiffness_scale(r_eff);
+    const double k1 = s * p_.k1, k2 = s * p_.k2, kc = s * p_.kc * adhesion_scale;
+    const double f_elastic = k2 * (delta - delta0);
+    const double f_load = loading_force(delta, k1, r_eff);
+    if (f_elastic >= f_load) {
+      delta0 = delta - f_load / k2;
+      return f_load;
+    }
+    if (f_elastic <= -kc * delta) {
+      delta0 = delta * (1.0 + kc / k2);
+      return -kc * delta;
+    }
+    return f_elastic;
+  }
+
+  ContactForce evaluate(const ContactKinematics& c, ContactHistory& h, double dt, double mu,
+                        double adhesion_scale) const {
+    const double s = stiffness_scale(c.r_eff);
+    double fn = normal_force(c.delta, h.delta0, c.r_eff, adhesion_scale);
+    if (p_.normal_damping_ratio > 0.0)
+      fn -= p_.normal_damping_ratio * 2.0 * std::sqrt(c.m_eff * s * p_.k2) * c.vn;
+    const double kt = s * p_.kt_ratio * p_.k1;
+    // Keep the stored spring in the current tangent plane at its old length, so a rotating
+    // pair neither loses nor gains spring force.
+    const double old_len = h.ft.norm();
+    h.ft -= h.ft.dot(c.n) * c.n;
+    const double new_len = h.ft.norm();
+    if (new_len > 0.0) h.ft *= old_len / new_len;
+    h.ft -= kt * dt * c.vt;  // eq. 9, incremental spring
+    const double gamma_t = damping_factor_ * std::sqrt(c.m_eff * kt);  // eq. 10
+    Vec3 ft = h.ft - gamma_t * c.vt;
+    const double limit = mu * std::max(fn, 0.0);
+    const double ft_len = ft.norm();
+    if (ft_len > limit) {  // Coulomb: slide, keep the spring at the limit
+      ft = (ft_len > 0.0) ? Vec3(ft * (limit / ft_len)) : Vec3::Zero();
+      h.ft = ft;
+    }
+    return {fn, ft};
+  }
+
+  // Elastic energy held by a contact, J: what it would give back if unloaded to zero force.
+  double stored_energy(double delta, const ContactHistory& h, double r_eff) const {
+    const double s = stiffness_scale(r_eff);
+    const double k2 = s * p_.k2;
+    const double f = k2 * (delta - h.delta0);
+    double e = (f > 0.0) ? 0.5 * f * f / k2 : 0.0;
+    const double kt = s * p_.kt_ratio * p_.k1;
+    if (kt > 0.0) e += 0.5 * h.ft.squaredNorm() / kt;
+    return e;
+  }
+
+ private:
+  ContactLawParams p_;
+  double damping_factor_ = 0.0;
+};
+
+}  // namespace pelletdem

@@ -1,0 +1,44 @@
+#pragma once
+// Verlet neighbour list built from a cell grid: O(N) to build, rebuilt only when some particle
+// has moved more than half the skin. Pairs are stored once (j > i) in CSR form, sorted by j, so
+// that the contact history of the old list can be merged into the new one in linear time.
+#include <vector>
+
+#include "pelletdem/contact_law.hpp"
+#include "pelletdem/particles.hpp"
+#include "pelletdem/vec.hpp"
+
+namespace pelletdem {
+
+struct Box {
+  Vec3 lo = Vec3::Zero();
+  Vec3 hi = Vec3::Zero();
+  bool contains(const Vec3& p) const {
+    return p.x() >= lo.x() && p.y() >= lo.y() && p.z() >= lo.z() && p.x() <= hi.x() &&
+           p.y() <= hi.y() && p.z() <= hi.z();
+  }
+};
+
+class NeighborList {
+ public:
+  std::vector<Index> start;              // start[i]..start[i+1]: pairs of particle i
+  std::vector<Index> j;                  // second particle of each pair (j > i)
+  std::vector<ContactHistory> history;   // per pair, survives rebuilds
+
+  std::size_t pair_count() const { return j.size(); }
+
+  // Rebuild for cutoff r_i + r_j + skin. Throws ParticleEscapedError for a particle outside
+  // the box. History of pairs still present is kept; pairs that left the list had no contact.
+  void build(const Particles& p, const Box& box, double skin, double r_max, long step,
+             int threads);
+
+  // Brute-force reference, O(N^2): every pair (i < j) closer than r_i + r_j + skin.
+  static std::vector<std::pair<Index, Index>> brute_force(const Particles& p, double skin);
+
+ private:
+  std::vector<Index> cell_start_, cell_items_, counts_;
+  std::vector<Index> new_start_, new_j_;
+  std::vector<ContactHistory> new_history_;
+};
+
+}  // namespace pelletdem

@@ -1,0 +1,38 @@
+#pragma once
+// Particle state as structure-of-arrays: each array is contiguous, so the bindings can hand
+// numpy an (N, 3) view and the force loops stream through memory.
+#include <vector>
+
+#include "pelletdem/vec.hpp"
+
+namespace pelletdem {
+
+struct Particles {
+  std::vector<Vec3> x;      // position, m
+  std::vector<Vec3> v;      // velocity, m/s
+  std::vector<Vec3> w;      // angular velocity, rad/s
+  std::vector<Vec3> f;      // force, N
+  std::vector<Vec3> t;      // torque, N m
+  std::vector<double> r;    // radius, m
+  std::vector<double> m;    // mass (density-scaled), kg
+  std::vector<double> inv_m;
+  std::vector<double> inv_i;  // 1 / moment of inertia (solid sphere, 2/5 m r^2), 1/(kg m^2)
+
+  std::size_t size() const { return r.size(); }
+
+  void push(const Vec3& xi, double ri, double mi) {
+    x.push_back(xi);
+    v.push_back(Vec3::Zero());
+    w.push_back(Vec3::Zero());
+    f.push_back(Vec3::Zero());
+    t.push_back(Vec3::Zero());
+    r.push_back(ri);
+    m.push_back(mi);
+    inv_m.push_back(1.0 / mi);
+    inv_i.push_back(1.0 / (0.4 * mi * ri * ri));
+  }
+
+  double moment_of_inertia(std::size_t i) const { return 1.0 / inv_i[i]; }
+};
+
+}  // namespace pelletdem

@@ -1,0 +1,191 @@
+#pragma once
+// The world: particles, walls, bonds, the contact table and the integrator. One call runs
+// thousands of steps; stop conditions are evaluated here, never in Python.
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "pelletdem/bonds.hpp"
+#include "pelletdem/contact_law.hpp"
+#include "pelletdem/neighbor.hpp"
+#include "pelletdem/particles.hpp"
+#include "pelletdem/walls.hpp"
+
+namespace pelletdem {
+
+struct WorldParams {
+  double dt = 2.0e-6;                 // time step, s
+  Vec3 gravity = Vec3(0, 0, -9.81);   // physical gravity, m/s^2 (divided by density_scale)
+  double density = 680.0;             // particle solid density, kg/m^3 (Table 4)
+  double density_scale = 1.0e4;       // mass factor; gravity is divided by it (section 3.1.2)
+  double skin = 2.0e-5;               // Verlet skin, m
+  Box box;                            // the domain; leaving it is an error
+  int threads = 1;
+  double max_overlap_ratio = 0.9;     // guard: delta / r beyond this stops the run
+  long sample_interval = 100;         // steps between samples of the time series
+  ContactLawParams contact;
+  void validate() const;
+};
+
+enum class StopKind {
+  Time,                  // time >= value, s
+  Steps,                 // steps run in this call >= value
+  KineticEnergyBelow,    // kinetic energy < value, J (scaled mass)
+  WallForceAbove,        // wall's compressive normal force >= value, N
+  WallForceBelow,        // wall's compressive normal force <= value, N
+  WallTravelAbove,       // wall's travel along its normal >= value, m
+  LoadMarkerAbove,       // load marker (sum of travels of load walls) >= value, m
+};
+
+struct StopCondition {
+  StopKind kind;
+  double value;
+  int wall = -1;
+  long check_interval = 1;  // steps between checks (kinetic energy costs a pass)
+};
+
+struct RunOutcome {
+  int condition = -1;  // index of the condition that fired; -1: the step budget ran out
+  long steps = 0;
+};
+
+// One row of the global time series.
+struct Sample {
+  double time, kinetic_energy, coordination_number, max_overlap_ratio, load_marker;
+  long n_contacts, n_bonds_intact, n_bonds_broken;
+};
+
+struct WallSample {
+  double time;
+  Vec3 force;
+  double normal_force;
+  Vec3 point;
+  double radius;
+  double travel;
+};
+
+class World {
+ public:
+  explicit World(const WorldParams& params);
+
+  // --- set-up ----------------------------------------------------------------------------
+  void add_particles(const std::vector<Vec3>& x, const std::vector<double>& r);
+  int add_plane(const std::string& name, const Vec3& point, const Vec3& normal);
+  int add_cylinder(const std::string& name, const Vec3& axis_point, double radius);
+  Wall& wall(int k);
+  const Wall& wall(int k) const;
+  int wall_count() const { return static_cast<int>(walls_.size()); }
+  void set_contact_params(const ContactLawParams& c);
+  void set_dt(double dt);
+  void set_threads(int threads);
+  void set_gravity(const Vec3& g);
+  void set_load_walls(const std::vector<int>& walls);
+  void set_adhesion_ramp(double t_start, double duration);  // kc scaled 1 -> 0 over it
+  void set_max_overlap_ratio(double ratio);
+
+  // --- running -----------------------------------------------------------------------------
+  void step();
+  void run(long n);
+  RunOutcome run_until(const std::vector<StopCondition>& conditions, long max_steps);
+
+  // --- bonds -------------------------------------------------------------------------------
+  // Bonds every pair whose surfaces are closer than params.gap_tolerance (touching pairs when
+  // 0), stress-free now. Returns the number created.
+  long create_bonds(const BondParams& params);
+  const std::vector<Bond>& bonds() const { return bonds_; }
+  std::vector<Bond>& bonds_mut() { return bonds_; }
+  const std::vector<BrokenBond>& broken_bonds() const { return broken_; }
+  long intact_bond_count() const;
+
+  // --- state -------------------------------------------------------------------------------
+  Particles& particles() { return p_; }
+  const Particles& particles() const { return p_; }
+  const WorldParams& params() const { return params_; }
+  double time() const { return time_; }
+  long step_count() const { return step_; }
+  double kinetic_energy() const;
+  double potential_energy() const;  // contacts, bonds and (scaled) gravity, J
+  double coordination_number() const;
+  long contact_count() const { return n_contacts_; }
+  double max_overlap_ratio_seen() const { return max_overlap_seen_; }
+  void reset_max_overlap_seen() { max_overlap_seen_ = 0.0; }
+  double load_marker() const;
+  double critical_time_step() const;
+  double adhesion_scale() const;
+  const NeighborList& neighbors() const { return nbr_; }
+  long rebuild_count() const { return rebuilds_; }
+  // Pairs currently overlapping: (i, j, overlap m, normal force N).
+  void contacts(std::vector<Index>& i, std::vector<Index>& j, std::vector<double>& overlap,
+                std::vector<double>& fn) const;
+
+  // --- time series -------------------------------------------------------------------------
+  const std::vector<Sample>& samples() const { return samples_; }
+  const std::vector<WallSample>& wall_samples(int k) const { return wall_samples_.at(k); }
+  void clear_samples();
+  void set_sample_interval(long n);
+  void record_sample();
+
+  // --- numpy views: the bindings refuse to add particles while a view is alive ----------------
+  std::shared_ptr<int> view_counter() const { return views_; }
+
+  // A deep copy (a relaxed pellet branches into many bond-parameter runs); views not shared.
+  World clone() const {
+    World w(*this);
+    w.views_ = std::make_shared<int>(0);
+    return w;
+  }
+  // Positions/velocities set from outside invalidate the contact list and the forces.
+  void invalidate() { list_valid_ = false; forces_valid_ = false; }
+
+  // --- restart support --------------------------------------------------------------------------
+  void set_time(double t, long step) { time_ = t; step_ = step; }
+  void set_broken_bonds(std::vector<BrokenBond> b) { broken_ = std::move(b); }
+
+ private:
+  void ensure_forces();
+  void compute_forces();
+  void wall_forces();
+  void move_walls();
+  void rebuild();
+  void build_wall_lists();
+  bool needs_rebuild(double max_disp) const;
+  void check_guards();
+  double effective_skin() const;
+  void validate_time_step() const;
+  double r_max_;
+
+  WorldParams params_;
+  Particles p_;
+  NeighborList nbr_;
+  std::vector<Wall> walls_;
+  std::vector<Bond> bonds_;
+  std::vector<BrokenBond> broken_;
+  std::vector<Vec3> x_build_;
+  std::vector<std::vector<Vec3>> buf_f_, buf_t_;
+  std::vector<int> load_walls_;
+  std::vector<Sample> samples_;
+  std::vector<std::vector<WallSample>> wall_samples_;
+  std::shared_ptr<int> views_ = std::make_shared<int>(0);
+  double time_ = 0.0;
+  long step_ = 0;
+  long rebuilds_ = 0;
+  long n_contacts_ = 0;
+  double max_overlap_ = 0.0, max_overlap_seen_ = 0.0;
+  Index max_overlap_i_ = 0;
+  bool forces_valid_ = false;
+  bool list_valid_ = false;
+  double ramp_start_ = 0.0, ramp_duration_ = -1.0;
+  HystereticLaw law_;
+};
+
+// Radii from a normal distribution truncated to [r_min, r_max] (rejection sampling), seeded.
+std::vector<double> truncated_normal_radii(long n, double mean, double sd, double r_min,
+                                           double r_max, std::uint64_t seed);
+
+// Random sequential addition of non-overlapping spheres inside a z-aligned cylinder between
+// z_lo and z_hi. Throws ParameterError when they do not fit. Output sorted along z for locality.
+std::vector<Vec3> random_pack_cylinder(std::vector<double>& radii, double cx, double cy,
+                                       double radius, double z_lo, double z_hi,
+                                       std::uint64_t seed, long max_attempts);
+
+}  // namespace pelletdem

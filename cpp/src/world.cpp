@@ -1,0 +1,481 @@
+#include "pelletdem/world.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <omp.h>
+
+#include "pelletdem/errors.hpp"
+
+namespace pelletdem {
+
+void WorldParams::validate() const {
+  require_positive("dt", dt, "s");
+  require(gravity.allFinite(), "gravity must be finite (m/s^2)");
+  require_range("density", density, 1e-3, 1e8, "kg/m^3");
+  require_range("density_scale", density_scale, 1e-3, 1e12);
+  require_nonnegative("skin", skin, "m");
+  require(box.lo.allFinite() && box.hi.allFinite(), "box corners must be finite (m)");
+  require((box.hi - box.lo).minCoeff() > 0.0,
+          cat("box: every extent must be > 0 m (got ", (box.hi - box.lo).transpose(), ")"));
+  require_range("threads", threads, 1, 1024);
+  require_range("max_overlap_ratio", max_overlap_ratio, 1e-3, 10.0);
+  require_range("sample_interval", static_cast<double>(sample_interval), 1, 1e12, "steps");
+  contact.validate();
+}
+
+World::World(const WorldParams& params)
+    : r_max_(0.0), params_(params), law_(params.contact) {
+  params_.validate();
+}
+
+void World::set_contact_params(const ContactLawParams& c) {
+  c.validate();
+  ContactLawParams old = params_.contact;
+  params_.contact = c;
+  try {
+    validate_time_step();
+  } catch (...) {
+    params_.contact = old;
+    throw;
+  }
+  law_ = HystereticLaw(c);
+}
+
+void World::set_dt(double dt) {
+  require_positive("dt", dt, "s");
+  const double old = params_.dt;
+  params_.dt = dt;
+  try {
+    validate_time_step();
+  } catch (...) {
+    params_.dt = old;
+    throw;
+  }
+}
+
+void World::set_threads(int threads) {
+  require_range("threads", threads, 1, 1024);
+  params_.threads = threads;
+}
+
+void World::set_gravity(const Vec3& g) {
+  require(g.allFinite(), "gravity must be finite (m/s^2)");
+  params_.gravity = g;
+  forces_valid_ = false;
+}
+
+void World::set_max_overlap_ratio(double ratio) {
+  require_range("max_overlap_ratio", ratio, 1e-3, 10.0);
+  params_.max_overlap_ratio = ratio;
+}
+
+void World::set_load_walls(const std::vector<int>& ws) {
+  for (int k : ws) require_range("load wall index", k, 0, wall_count() - 1);
+  for (Wall& w : walls_) w.load_wall = false;
+  for (int k : ws) walls_[k].load_wall = true;
+}
+
+void World::set_adhesion_ramp(double t_start, double duration) {
+  require(std::isfinite(t_start), "adhesion ramp start must be finite (s)");
+  require_nonnegative("adhesion ramp duration", duration, "s");
+  ramp_start_ = t_start;
+  ramp_duration_ = duration;
+}
+
+void World::set_sample_interval(long n) {
+  require_range("sample_interval", static_cast<double>(n), 1, 1e12, "steps");
+  params_.sample_interval = n;
+}
+
+void World::add_particles(const std::vector<Vec3>& x, const std::vector<double>& r) {
+  require(x.size() == r.size(), cat("positions (", x.size(), ") and radii (", r.size(),
+                                    ") must have the same length"));
+  require(*views_ == 0,
+          "cannot add particles while numpy views of the particle arrays are alive: delete "
+          "them (or copy them) first, adding particles moves the arrays");
+  require(bonds_.empty(), "cannot add particles after bonds were created");
+  for (std::size_t k = 0; k < x.size(); ++k) {
+    if (!(r[k] > 0.0) || !std::isfinite(r[k]))
+      throw ParameterError(cat("radius[", k, "] = ", r[k], " m: radii must be finite and > 0"));
+    if (!x[k].allFinite())
+      throw ParameterError(cat("position[", k, "] is not finite"));
+    if (!params_.box.contains(x[k]))
+      throw ParameterError(cat("position[", k, "] = (", x[k].transpose(),
+                               ") m lies outside the domain box"));
+  }
+  const double rho = params_.density * params_.density_scale;
+  for (std::size_t k = 0; k < x.size(); ++k) {
+    p_.push(x[k], r[k], rho * 4.0 / 3.0 * kPi * r[k] * r[k] * r[k]);
+    r_max_ = std::max(r_max_, r[k]);
+  }
+  x_build_.resize(p_.size());
+  list_valid_ = false;
+  forces_valid_ = false;
+  validate_time_step();
+}
+
+int World::add_plane(const std::string& name, const Vec3& point, const Vec3& normal) {
+  Wall w;
+  w.name = name;
+  w.kind = WallKind::Plane;
+  w.point = point;
+  const double len = normal.norm();
+  require(normal.allFinite() && len > 0.0, cat("wall '", name, "': normal must be non-zero"));
+  w.normal = normal / len;
+  w.validate();
+  walls_.push_back(w);
+  wall_samples_.emplace_back();
+  list_valid_ = false;
+  forces_valid_ = false;
+  validate_time_step();
+  return wall_count() - 1;
+}
+
+int World::add_cylinder(const std::string& name, const Vec3& axis_point, double radius) {
+  Wall w;
+  w.name = name;
+  w.kind = WallKind::Cylinder;
+  w.point = axis_point;
+  w.radius = radius;
+  w.validate();
+  walls_.push_back(w);
+  wall_samples_.emplace_back();
+  list_valid_ = false;
+  forces_valid_ = false;
+  return wall_count() - 1;
+}
+
+Wall& World::wall(int k) {
+  require_range("wall index", k, 0, wall_count() - 1);
+  return walls_[k];
+}
+const Wall& World::wall(int k) const {
+  require_range("wall index", k, 0, wall_count() - 1);
+  return walls_[k];
+}
+
+double World::critical_time_step() const {
+  if (p_.size() == 0) return HUGE_VAL;
+  // Stiffest single contact against the lightest body: a linear oscillator is stable for
+  // dt < 2 / omega. Tangential springs couple to rotation, which raises their effective
+  // stiffness by 1 + m r^2 / I = 3.5 for a solid sphere.
+  double m_min = HUGE_VAL, r_min = HUGE_VAL;
+  for (std::size_t i = 0; i < p_.size(); ++i) {
+    m_min = std::min(m_min, p_.m[i]);
+    r_min = std::min(r_min, p_.r[i]);
+  }
+  const ContactLawParams& c = params_.contact;
+  const double s_wall = c.scale_with_radius ? 2.0 * r_max_ / c.r_ref : 1.0;
+  const double k_eff = s_wall * std::max(c.k2, 3.5 * c.kt_ratio * c.k1);
+  // A wall is a body of infinite mass, so the lightest particle against it is the worst case.
+  return 2.0 * std::sqrt(m_min / k_eff);
+}
+
+void World::validate_time_step() const {
+  const double dtc = critical_time_step();
+  if (params_.dt > dtc)
+    throw ParameterError(cat("dt = ", params_.dt, " s is above the stability limit of the "
+                             "stiffest contact: allowed 0 < dt <= ", dtc,
+                             " s (2 sqrt(m_min / k_max)); the paper uses about 0.1 of it"));
+}
+
+double World::effective_skin() const {
+  return params_.skin > 0.0 ? params_.skin : 0.1 * r_max_;
+}
+
+void World::build_wall_lists() {
+  const double skin = effective_skin();
+  for (Wall& w : walls_) {
+    std::vector<WallContact> next;
+    std::size_t a = 0;
+    for (std::size_t i = 0; i < p_.size(); ++i) {
+      Vec3 n_into;
+      if (w.gap(p_.x[i], p_.r[i], n_into) >= skin) continue;
+      WallContact wc{static_cast<Index>(i), ContactHistory{}};
+      while (a < w.contacts.size() && w.contacts[a].i < wc.i) ++a;
+      if (a < w.contacts.size() && w.contacts[a].i == wc.i) wc.h = w.contacts[a].h;
+      next.push_back(wc);
+    }
+    w.contacts.swap(next);
+    w.moved_since_build = 0.0;
+  }
+}
+
+void World::rebuild() {
+  nbr_.build(p_, params_.box, effective_skin(), r_max_, step_, params_.threads);
+  build_wall_lists();
+  std::copy(p_.x.begin(), p_.x.end(), x_build_.begin());
+  list_valid_ = true;
+  ++rebuilds_;
+}
+
+void World::ensure_forces() {
+  if (!list_valid_) rebuild();
+  if (!forces_valid_) {
+    compute_forces();
+    forces_valid_ = true;
+  }
+}
+
+void World::move_walls() {
+  const double dt = params_.dt;
+  for (Wall& w : walls_) {
+    if (!w.active) continue;
+    if (w.servo && w.kind == WallKind::Plane) {
+      const double err = w.servo_force - w.normal_force();
+      const double speed =
+          std::clamp(w.servo_gain * err, -w.servo_max_speed, w.servo_max_speed);
+      w.velocity = speed * w.normal;
+    }
+    w.point += w.velocity * dt;
+    double moved = w.velocity.norm() * dt;
+    if (w.kind == WallKind::Cylinder) {
+      w.radius += w.radius_rate * dt;
+      if (!(w.radius > 0.0))
+        throw SimulationError(cat("wall '", w.name, "': cylinder radius fell to ", w.radius,
+                                  " m at step ", step_));
+      moved += std::abs(w.radius_rate) * dt;
+      w.travel -= w.radius_rate * dt;
+    } else {
+      w.travel += w.velocity.dot(w.normal) * dt;
+    }
+    w.moved_since_build += moved;
+  }
+}
+
+bool World::needs_rebuild(double max_disp) const {
+  const double skin = effective_skin();
+  if (2.0 * max_disp > skin) return true;
+  for (const Wall& w : walls_)
+    if (w.active && max_disp + w.moved_since_build > skin) return true;
+  return false;
+}
+
+void World::check_guards() {
+  double worst = max_overlap_;
+  Index who = max_overlap_i_;
+  const char* where = "between two particles";
+  for (const Wall& w : walls_) {
+    if (w.max_overlap_ratio > worst) {
+      worst = w.max_overlap_ratio;
+      who = w.max_overlap_particle;
+      where = "against a wall";
+    }
+  }
+  if (worst > params_.max_overlap_ratio)
+    throw OverlapError(cat("overlap / radius = ", worst, " ", where, " at particle ", who,
+                           ", step ", step_, " (t = ", time_, " s) exceeds max_overlap_ratio = ",
+                           params_.max_overlap_ratio,
+                           "; likely causes: loading speed too high, stiffness too low for the "
+                           "target stress, or time step too large"));
+}
+
+void World::step() {
+  const long n = static_cast<long>(p_.size());
+  const double dt = params_.dt;
+  ensure_forces();
+  double max_disp2 = 0.0;
+  long bad = -1;
+  const int nt = params_.threads;
+#pragma omp parallel for schedule(static) num_threads(nt) reduction(max : max_disp2) \
+    reduction(max : bad)
+  for (long i = 0; i < n; ++i) {
+    p_.v[i] += (0.5 * dt * p_.inv_m[i]) * p_.f[i];
+    p_.w[i] += (0.5 * dt * p_.inv_i[i]) * p_.t[i];
+    p_.x[i] += dt * p_.v[i];
+    if (!p_.x[i].allFinite()) bad = std::max(bad, i);
+    max_disp2 = std::max(max_disp2, (p_.x[i] - x_build_[i]).squaredNorm());
+  }
+  if (bad >= 0)
+    throw NonFiniteError(cat("particle ", bad, " has a non-finite position at step ", step_ + 1,
+                             " (t = ", time_ + dt, " s); likely causes: time step too large "
+                             "or loading speed too high"));
+  move_walls();
+  if (needs_rebuild(std::sqrt(max_disp2))) rebuild();
+  time_ += dt;
+  ++step_;
+  compute_forces();
+#pragma omp parallel for schedule(static) num_threads(nt)
+  for (long i = 0; i < n; ++i) {
+    p_.v[i] += (0.5 * dt * p_.inv_m[i]) * p_.f[i];
+    p_.w[i] += (0.5 * dt * p_.inv_i[i]) * p_.t[i];
+  }
+  check_guards();
+  if (step_ % params_.sample_interval == 0) record_sample();
+}
+
+void World::run(long steps) {
+  require(steps >= 0, cat("steps = ", steps, " must be >= 0"));
+  validate_time_step();
+  for (long s = 0; s < steps; ++s) step();
+}
+
+RunOutcome World::run_until(const std::vector<StopCondition>& conds, long max_steps) {
+  require(max_steps >= 0, cat("max_steps = ", max_steps, " must be >= 0"));
+  for (const StopCondition& c : conds) {
+    require(std::isfinite(c.value), "stop condition value must be finite");
+    require(c.check_interval >= 1, "stop condition check_interval must be >= 1 step");
+    const bool needs_wall = c.kind == StopKind::WallForceAbove ||
+                            c.kind == StopKind::WallForceBelow ||
+                            c.kind == StopKind::WallTravelAbove;
+    if (needs_wall) require_range("stop condition wall", c.wall, 0, wall_count() - 1);
+  }
+  validate_time_step();
+  ensure_forces();
+  RunOutcome out;
+  for (long s = 0; s < max_steps; ++s) {
+    step();
+    ++out.steps;
+    for (std::size_t k = 0; k < conds.size(); ++k) {
+      const StopCondition& c = conds[k];
+      if (out.steps % c.check_interval != 0) continue;
+      bool hit = false;
+      switch (c.kind) {
+        case StopKind::Time: hit = time_ >= c.value; break;
+        case StopKind::Steps: hit = out.steps >= c.value; break;
+        case StopKind::KineticEnergyBelow: hit = kinetic_energy() < c.value; break;
+        case StopKind::WallForceAbove: hit = walls_[c.wall].normal_force() >= c.value; break;
+        case StopKind::WallForceBelow: hit = walls_[c.wall].normal_force() <= c.value; break;
+        case StopKind::WallTravelAbove: hit = walls_[c.wall].travel >= c.value; break;
+        case StopKind::LoadMarkerAbove: hit = load_marker() >= c.value; break;
+      }
+      if (hit) {
+        out.condition = static_cast<int>(k);
+        return out;
+      }
+    }
+  }
+  return out;
+}
+
+double World::load_marker() const {
+  double m = 0.0;
+  for (const Wall& w : walls_)
+    if (w.load_wall) m += w.travel;
+  return m;
+}
+
+double World::kinetic_energy() const {
+  const long n = static_cast<long>(p_.size());
+  const int nt = params_.threads;
+  std::vector<double> part(nt, 0.0);
+#pragma omp parallel num_threads(nt)
+  {
+    double e = 0.0;
+#pragma omp for schedule(static)
+    for (long i = 0; i < n; ++i)
+      e += 0.5 * p_.m[i] * p_.v[i].squaredNorm() + 0.5 / p_.inv_i[i] * p_.w[i].squaredNorm();
+    part[omp_get_thread_num()] = e;
+  }
+  double e = 0.0;
+  for (double x : part) e += x;  // fixed order: reproducible for a given thread count
+  return e;
+}
+
+double World::potential_energy() const {
+  double e = 0.0;
+  const Vec3 g = params_.gravity / params_.density_scale;
+  for (std::size_t i = 0; i < p_.size(); ++i) e -= p_.m[i] * g.dot(p_.x[i]);
+  for (std::size_t i = 0; i + 1 < nbr_.start.size(); ++i)
+    for (Index k = nbr_.start[i]; k < nbr_.start[i + 1]; ++k) {
+      const Index j = nbr_.j[k];
+      const double rsum = p_.r[i] + p_.r[j];
+      const double delta = rsum - (p_.x[j] - p_.x[i]).norm();
+      if (delta > 0.0) e += law_.stored_energy(delta, nbr_.history[k], p_.r[i] * p_.r[j] / rsum);
+    }
+  for (const Wall& w : walls_) {
+    if (!w.active) continue;
+    for (const WallContact& wc : w.contacts) {
+      Vec3 n_into;
+      const double gap = w.gap(p_.x[wc.i], p_.r[wc.i], n_into);
+      if (gap < 0.0) e += law_.stored_energy(-gap, wc.h, p_.r[wc.i]);
+    }
+  }
+  for (const Bond& b : bonds_) {
+    if (b.mode != BondMode::Intact) continue;
+    const double a = b.area(), jp = b.polar_moment();
+    e += 0.5 * b.fn * b.fn / (b.kn * a);
+    if (b.kt > 0.0) e += 0.5 * b.ft.squaredNorm() / (b.kt * a) + 0.5 * b.mn * b.mn / (b.kt * jp);
+    e += 0.5 * b.mt.squaredNorm() / (b.kn * 0.5 * jp);
+  }
+  return e;
+}
+
+double World::coordination_number() const {
+  return p_.size() ? 2.0 * static_cast<double>(n_contacts_) / p_.size() : 0.0;
+}
+
+long World::intact_bond_count() const {
+  long c = 0;
+  for (const Bond& b : bonds_) c += b.mode == BondMode::Intact;
+  return c;
+}
+
+void World::contacts(std::vector<Index>& ci, std::vector<Index>& cj, std::vector<double>& ov,
+                     std::vector<double>& fn) const {
+  const double adh = adhesion_scale();
+  for (std::size_t i = 0; i + 1 < nbr_.start.size(); ++i)
+    for (Index k = nbr_.start[i]; k < nbr_.start[i + 1]; ++k) {
+      const Index j = nbr_.j[k];
+      const double rsum = p_.r[i] + p_.r[j];
+      const double delta = rsum - (p_.x[j] - p_.x[i]).norm();
+      if (delta <= 0.0) continue;
+      double d0 = nbr_.history[k].delta0;
+      ci.push_back(static_cast<Index>(i));
+      cj.push_back(j);
+      ov.push_back(delta);
+      fn.push_back(law_.normal_force(delta, d0, p_.r[i] * p_.r[j] / rsum, adh));
+    }
+}
+
+long World::create_bonds(const BondParams& bp) {
+  bp.validate();
+  require(bp.gap_tolerance <= effective_skin(),
+          cat("bond gap_tolerance = ", bp.gap_tolerance, " m must not exceed the neighbour skin ",
+              effective_skin(), " m (raise skin)"));
+  require(bonds_.empty(), "bonds were already created; a world is bonded once");
+  ensure_forces();
+  rebuild();
+  long created = 0;
+  for (std::size_t i = 0; i + 1 < nbr_.start.size(); ++i)
+    for (Index k = nbr_.start[i]; k < nbr_.start[i + 1]; ++k) {
+      const Index j = nbr_.j[k];
+      const Vec3 d = p_.x[j] - p_.x[i];
+      const double dist = d.norm();
+      const double rsum = p_.r[i] + p_.r[j];
+      if (!(dist < rsum + bp.gap_tolerance)) continue;  // touching, or within the gap
+      Bond b;
+      b.i = static_cast<Index>(i);
+      b.j = j;
+      b.n_prev = d / dist;
+      b.radius = bp.radius;
+      b.kn = bp.youngs_modulus / rsum;  // eq. 13
+      b.kt = bp.kt_ratio * b.kn;
+      b.sigma_c = bp.sigma_c;
+      b.tau_c = bp.tau_c;
+      bonds_.push_back(b);
+      ++created;
+    }
+  forces_valid_ = false;
+  return created;
+}
+
+void World::clear_samples() {
+  samples_.clear();
+  for (auto& ws : wall_samples_) ws.clear();
+}
+
+void World::record_sample() {
+  long intact = 0;
+  for (const Bond& b : bonds_) intact += b.mode == BondMode::Intact;
+  samples_.push_back(Sample{time_, kinetic_energy(), coordination_number(), max_overlap_,
+                            load_marker(), n_contacts_, intact,
+                            static_cast<long>(broken_.size())});
+  for (int k = 0; k < wall_count(); ++k) {
+    const Wall& w = walls_[k];
+    wall_samples_[k].push_back(
+        WallSample{time_, w.force, w.normal_force(), w.point, w.radius, w.travel});
+  }
+}
+
+}  // namespace pelletdem

@@ -1,0 +1,266 @@
+"""The Python face of the C++ world: keyword construction, stop conditions by name, progress.
+
+Everything here runs outside the time-step loop: one ``run_until`` call runs thousands of
+steps in C++ and returns when a condition evaluated there fires.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, fields
+from typing import Callable, Optional, Sequence
+
+import numpy as np
+
+from . import _core
+from ._core import (  # noqa: F401  (re-exported)
+    NonFiniteError,
+    OverlapError,
+    ParameterError,
+    ParticleEscapedError,
+    SimulationError,
+    StopKind,
+)
+
+__all__ = [
+    "ContactLaw", "BondLaw", "World", "RunOutcome", "ParameterError", "SimulationError",
+    "OverlapError", "ParticleEscapedError", "NonFiniteError", "truncated_normal_radii",
+    "random_pack_cylinder", "k1_from_yield_strength", "rayleigh_time_step",
+]
+
+
+@dataclass
+class ContactLaw:
+    """Parameters of the paper's contact law (eq. 5-11), SI units.
+
+    k1, k2, kc: loading, unloading and adhesion stiffness, N/m (Table 4: 1e5, 4e5, 600).
+    kt_ratio: tangential stiffness over k1 (the paper: k_t equal to the normal stiffness).
+    mu, mu_wall: friction with particles (0.5) and walls (0.15). rolling: m_r of eq. 11 (0.01).
+    normal_damping_ratio: optional viscous normal damping, fraction of critical (paper: 0).
+    scale_with_radius: k scaled by 2 r*/r_ref per pair (eq. 7's proportionality to radius).
+    hardening, hardening_exponent: optional stiffening of the loading branch,
+    k1 (1 + hardening (delta/r*)^exponent); 0 is the paper's linear law.
+    """
+
+    k1: float = 1.0e5
+    k2: float = 4.0e5
+    kc: float = 600.0
+    kt_ratio: float = 1.0
+    mu: float = 0.5
+    mu_wall: float = 0.15
+    rolling: float = 0.01
+    normal_damping_ratio: float = 0.0
+    scale_with_radius: bool = False
+    r_ref: float = 2.0e-4
+    hardening: float = 0.0
+    hardening_exponent: float = 1.0
+
+    @property
+    def restitution(self) -> float:
+        """Coefficient of restitution e = sqrt(k1/k2) (eq. 8), dimensionless."""
+        return math.sqrt(self.k1 / self.k2)
+
+    def to_core(self) -> _core.ContactLawParams:
+        """The C++ parameter struct, validated (raises ParameterError naming the field)."""
+        c = _core.ContactLawParams()
+        for f in fields(self):
+            setattr(c, f.name, getattr(self, f.name))
+        c.validate()
+        return c
+
+
+@dataclass
+class BondLaw:
+    """Parallel-bond parameters (eq. 12-15), SI units.
+
+    radius: r_b, m (20e-6 in the paper). youngs_modulus: E_b, Pa (k_n^b = E_b/(r_i + r_j)).
+    kt_ratio: k_t^b / k_n^b (left open by the paper; 1). sigma_c, tau_c: strengths, Pa.
+    gap_tolerance: pairs whose surfaces are closer than this get a bond too, m (0: touching).
+    """
+
+    radius: float = 2.0e-5
+    youngs_modulus: float = 120e6
+    kt_ratio: float = 1.0
+    sigma_c: float = 36e6
+    tau_c: float = 36e6
+    gap_tolerance: float = 0.0
+
+    def to_core(self) -> _core.BondParams:
+        """The C++ parameter struct, validated."""
+        b = _core.BondParams()
+        for f in fields(self):
+            setattr(b, f.name, float(getattr(self, f.name)))
+        b.validate()
+        return b
+
+
+@dataclass
+class RunOutcome:
+    """Why a run stopped: `reason` is the name of the condition that fired, or 'max_steps'."""
+
+    reason: str
+    steps: int
+    time: float
+
+
+_CONDITIONS = {
+    "time": StopKind.Time,
+    "steps": StopKind.Steps,
+    "kinetic_energy_below": StopKind.KineticEnergyBelow,
+    "wall_force_above": StopKind.WallForceAbove,
+    "wall_force_below": StopKind.WallForceBelow,
+    "wall_travel_above": StopKind.WallTravelAbove,
+    "load_marker_above": StopKind.LoadMarkerAbove,
+}
+
+
+class World:
+    """A DEM world: particles, analytic walls, bonds; stepped in C++.
+
+    Parameters (SI): dt (s); box ((xlo, ylo, zlo), (xhi, yhi, zhi)) in m, leaving it is an
+    error; contact: ContactLaw; density (kg/m^3, 680 in Table 4); density_scale (mass factor,
+    gravity divided by it, 1e4 in the paper); gravity (physical, m/s^2); skin (Verlet skin, m;
+    0 = 0.1 of the largest radius); threads (OpenMP); max_overlap_ratio (guard on delta/r);
+    sample_interval (steps between time-series samples).
+    """
+
+    def __init__(self, *, dt: float = 2e-6, box=((-0.01, -0.01, -0.01), (0.01, 0.01, 0.05)),
+                 contact: Optional[ContactLaw] = None, density: float = 680.0,
+                 density_scale: float = 1e4, gravity=(0.0, 0.0, -9.81), skin: float = 0.0,
+                 threads: int = 1, max_overlap_ratio: float = 0.9, sample_interval: int = 100):
+        p = _core.WorldParams()
+        p.dt = _finite("dt", dt)
+        lo, hi = box
+        p.box_lo = [_finite("box", v) for v in lo]
+        p.box_hi = [_finite("box", v) for v in hi]
+        p.contact = (contact or ContactLaw()).to_core()
+        p.density = _finite("density", density)
+        p.density_scale = _finite("density_scale", density_scale)
+        p.gravity = [_finite("gravity", g) for g in gravity]
+        p.skin = _finite("skin", skin)
+        p.threads = _int("threads", threads, 1, 1024)
+        p.max_overlap_ratio = _finite("max_overlap_ratio", max_overlap_ratio)
+        p.sample_interval = _int("sample_interval", sample_interval, 1, 10**12)
+        self._core = _core.World(p)
+        self.box = (tuple(lo), tuple(hi))
+
+    def __getattr__(self, name):
+        # Everything not defined here is the C++ world's (views, walls, bonds, samples).
+        if name == "_core":
+            raise AttributeError(name)
+        return getattr(self._core, name)
+
+    def run(self, steps: int, progress: Optional[Callable[[int], None]] = None) -> RunOutcome:
+        """Run exactly `steps` time steps in C++ (GIL released; Ctrl-C stops within ~0.1 s)."""
+        return self.run_until(steps=_int("steps", steps, 0, 10**13), max_steps=int(steps),
+                              progress=progress)
+
+    def run_until(self, max_steps: int, progress: Optional[Callable[[int], None]] = None,
+                  check_interval: int = 1, **conditions) -> RunOutcome:
+        """Run until the first condition holds or `max_steps` steps have run.
+
+        Conditions (keyword=value): time (s), steps, kinetic_energy_below (J, scaled mass),
+        wall_force_above=(wall, N), wall_force_below=(wall, N) (compressive normal force),
+        wall_travel_above=(wall, m), load_marker_above (m). kinetic_energy_below is tested
+        every `check_interval` steps (it costs one pass over the particles).
+        """
+        max_steps = _int("max_steps", max_steps, 0, 10**13)
+        conds, names = [], []
+        for name, value in conditions.items():
+            if name not in _CONDITIONS:
+                raise ParameterError(f"unknown stop condition '{name}': allowed {sorted(_CONDITIONS)}")
+            wall = -1
+            if name.startswith("wall_"):
+                if not (isinstance(value, (tuple, list)) and len(value) == 2):
+                    raise ParameterError(f"{name} must be (wall index, value)")
+                wall, value = int(value[0]), value[1]
+            interval = check_interval if name == "kinetic_energy_below" else 1
+            conds.append(_core.StopCondition(_CONDITIONS[name], _finite(name, value), wall,
+                                             _int("check_interval", interval, 1, 10**9)))
+            names.append(name)
+        index, steps = self._core.run_until(conds, max_steps, progress)
+        reason = names[index] if index >= 0 else "max_steps"
+        return RunOutcome(reason, int(steps), self.time)
+
+    def positions(self) -> np.ndarray:
+        """Copy of particle positions, (N, 3) m."""
+        return np.array(self.x)
+
+    def velocities(self) -> np.ndarray:
+        """Copy of particle velocities, (N, 3) m/s."""
+        return np.array(self.v)
+
+    def radii(self) -> np.ndarray:
+        """Copy of particle radii, (N,) m."""
+        return np.array(self.r)
+
+    def masses(self) -> np.ndarray:
+        """Copy of particle masses (density-scaled), (N,) kg."""
+        return np.array(self.m)
+
+    def clone(self) -> "World":
+        """Deep copy of the whole state (particles, walls, contact history, bonds)."""
+        new = World.__new__(World)
+        new._core = self._core.clone()
+        new.box = self.box
+        return new
+
+    def __setattr__(self, name, value):
+        # Settable engine properties (dt, threads, gravity) go to C++; the rest stays here.
+        if name in ("dt", "threads", "gravity"):
+            setattr(self._core, name, value)
+        else:
+            object.__setattr__(self, name, value)
+
+
+def _finite(name: str, value) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ParameterError(f"{name} must be a real number, got {value!r}") from None
+    if not math.isfinite(v):
+        raise ParameterError(f"{name} = {v} must be finite")
+    return v
+
+
+def _int(name: str, value, lo: int, hi: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        if isinstance(value, float) and value.is_integer():
+            value = int(value)
+        else:
+            raise ParameterError(f"{name} must be an integer in [{lo}, {hi}], got {value!r}")
+    if not lo <= int(value) <= hi:
+        raise ParameterError(f"{name} = {value} is out of range: allowed {lo} <= {name} <= {hi}")
+    return int(value)
+
+
+def truncated_normal_radii(n: int, mean: float = 2e-4, sd: float = 2e-5, r_min: float = 1.4e-4,
+                           r_max: float = 2.6e-4, seed: int = 0) -> np.ndarray:
+    """Radii (m) from a normal distribution truncated to [r_min, r_max] (the paper's 0.2 mm
+    mean, 0.02 mm SD, 0.14-0.26 mm range by default), reproducible for a seed."""
+    return np.asarray(_core.truncated_normal_radii(_int("n", n, 0, 10**8), mean, sd, r_min, r_max,
+                                                   _int("seed", seed, 0, 2**63 - 1)))
+
+
+def random_pack_cylinder(radii, radius: float, z_lo: float, z_hi: float, seed: int = 0,
+                         center=(0.0, 0.0), max_attempts: int = 100000):
+    """Random non-overlapping spheres in a z-aligned cylinder of `radius` (m) between z_lo and
+    z_hi (m). Returns (positions (N, 3) m, radii (N,) m), sorted along z."""
+    return _core.random_pack_cylinder(np.asarray(radii, dtype=float), center[0], center[1],
+                                      radius, z_lo, z_hi, _int("seed", seed, 0, 2**63 - 1),
+                                      _int("max_attempts", max_attempts, 1, 10**9))
+
+
+def k1_from_yield_strength(p_y: float, r: float = 2e-4) -> float:
+    """Loading stiffness k1 = 5 r p_y (N/m) from the yield strength p_y (Pa), eq. 7.
+
+    Convention: r is the particle radius, which reproduces Table 4 (p_y = 100 MPa,
+    r = 0.2 mm -> 1e5 N/m). Eq. 7 literally uses r* = r_i r_j/(r_i + r_j), half of that for
+    equal spheres (5e4 N/m); see NOTES in the README.
+    """
+    return 5.0 * _finite("r", r) * _finite("p_y", p_y)
+
+
+def rayleigh_time_step(r: float, density: float, youngs_modulus: float, poisson: float) -> float:
+    """Rayleigh time step pi r sqrt(rho/G) / (0.1631 nu + 0.8766), s (G = E / (2 (1 + nu)))."""
+    g = youngs_modulus / (2.0 * (1.0 + poisson))
+    return math.pi * r * math.sqrt(density / g) / (0.1631 * poisson + 0.8766)
