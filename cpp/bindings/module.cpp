@@ -23,11 +23,33 @@ Vec3 to_vec3(const std::vector<double>& v, const char* name) {
   return Vec3(v[0], v[1], v[2]);
 }
 
+// numpy's view of obj, refused unless its dtype is real (float or integer): forcecast alone
+// would turn complex numbers into their real parts and None into NaN without a word.
+py::array real_array(const py::handle& obj, const char* name, const char* shape) {
+  py::array raw;
+  try {
+    raw = py::module_::import("numpy").attr("asarray")(obj);
+  } catch (py::error_already_set&) {
+    throw ParameterError(cat(name, " must be a numeric array of shape ", shape));
+  }
+  const char kind = raw.dtype().kind();
+  if (kind != 'f' && kind != 'i' && kind != 'u')
+    throw ParameterError(cat(name, " must be a real numeric array (float or int) of shape ", shape,
+                             ", got dtype ", py::str(raw.dtype()).cast<std::string>()));
+  return raw;
+}
+
+std::string shape_of(const py::array& a) {
+  std::string s = "(";
+  for (py::ssize_t k = 0; k < a.ndim(); ++k) s += (k ? ", " : "") + std::to_string(a.shape(k));
+  return s + (a.ndim() == 1 ? ",)" : ")");
+}
+
 std::vector<Vec3> to_vec3_array(const py::handle& obj, const char* name) {
-  Arr a = Arr::ensure(obj);
+  Arr a = Arr::ensure(real_array(obj, name, "(N, 3)"));
   if (!a) throw ParameterError(cat(name, " must be a numeric array of shape (N, 3)"));
   if (a.ndim() != 2 || a.shape(1) != 3)
-    throw ParameterError(cat(name, " must have shape (N, 3), got ndim ", a.ndim()));
+    throw ParameterError(cat(name, " must have shape (N, 3), got shape ", shape_of(a)));
   std::vector<Vec3> out(a.shape(0));
   auto r = a.unchecked<2>();
   for (py::ssize_t k = 0; k < a.shape(0); ++k) out[k] = Vec3(r(k, 0), r(k, 1), r(k, 2));
@@ -35,9 +57,10 @@ std::vector<Vec3> to_vec3_array(const py::handle& obj, const char* name) {
 }
 
 std::vector<double> to_vector(const py::handle& obj, const char* name) {
-  Arr a = Arr::ensure(obj);
+  Arr a = Arr::ensure(real_array(obj, name, "(N,)"));
   if (!a) throw ParameterError(cat(name, " must be a numeric array of shape (N,)"));
-  if (a.ndim() != 1) throw ParameterError(cat(name, " must be one-dimensional, got ndim ", a.ndim()));
+  if (a.ndim() != 1)
+    throw ParameterError(cat(name, " must be one-dimensional, shape (N,), got shape ", shape_of(a)));
   return std::vector<double>(a.data(), a.data() + a.shape(0));
 }
 
@@ -150,6 +173,8 @@ PYBIND11_MODULE(_core, m) {
       .def_readwrite("mu", &ContactLawParams::mu)
       .def_readwrite("mu_wall", &ContactLawParams::mu_wall)
       .def_readwrite("rolling", &ContactLawParams::rolling)
+      .def_readwrite("wall_adhesion", &ContactLawParams::wall_adhesion)
+      .def_readwrite("wall_stiffness_factor", &ContactLawParams::wall_stiffness_factor)
       .def_readwrite("normal_damping_ratio", &ContactLawParams::normal_damping_ratio)
       .def_readwrite("scale_with_radius", &ContactLawParams::scale_with_radius)
       .def_readwrite("r_ref", &ContactLawParams::r_ref)

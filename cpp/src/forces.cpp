@@ -25,9 +25,12 @@ struct BondResult {
   bool broke = false;
 };
 
-// Parallel bond update, eq. 12, and breakage test, eq. 14.
-inline BondResult update_bond(Bond& b, const Particles& p, double dt) {
+// Parallel bond update, eq. 12, and breakage test, eq. 14. `step` is the world's step count:
+// increments are taken once per step (see Bond::step_updated).
+inline BondResult update_bond(Bond& b, const Particles& p, double dt_step, long step) {
   BondResult out{Vec3::Zero(), Vec3::Zero(), Vec3::Zero(), false};
+  const double dt = (b.step_updated == step) ? 0.0 : dt_step;
+  b.step_updated = step;
   const Index i = b.i, j = b.j;
   const Vec3 d = p.x[j] - p.x[i];
   const double dist = d.norm();
@@ -85,7 +88,7 @@ double World::adhesion_scale() const {
 
 void World::compute_forces() {
   const long n = static_cast<long>(p_.size());
-  const int nt = params_.threads;
+  const int nt = team();
   if (static_cast<int>(buf_f_.size()) != nt - 1) {
     buf_f_.assign(nt - 1, {});
     buf_t_.assign(nt - 1, {});
@@ -163,7 +166,7 @@ void World::compute_forces() {
       for (long b = 0; b < nbonds; ++b) {
         Bond& bond = bonds_[b];
         if (bond.mode != BondMode::Intact) continue;
-        const BondResult r = update_bond(bond, p_, dt);
+        const BondResult r = update_bond(bond, p_, dt, step_);
         if (r.broke) {
           broke_t[tid].push_back(b);
           continue;
@@ -207,7 +210,8 @@ void World::compute_forces() {
     const double dist = d.norm();
     const double half_gap = 0.5 * (dist - p_.r[bond.i] - p_.r[bond.j]);
     const Vec3 centre = p_.x[bond.i] + (p_.r[bond.i] + half_gap) * d / dist;
-    broken_.push_back(BrokenBond{time_ + dt, step_ + 1, bond.i, bond.j, centre, bond.mode,
+    // compute_forces runs after step() advanced time_ and step_: they are the breakage time.
+    broken_.push_back(BrokenBond{time_, step_, bond.i, bond.j, centre, bond.mode,
                                  bond.sigma_max(), bond.tau_max(), marker});
     bond.fn = 0.0;
     bond.ft.setZero();
@@ -220,9 +224,9 @@ void World::compute_forces() {
 
 void World::wall_forces() {
   const double dt = params_.dt;
-  const double adh = adhesion_scale();
   const ContactLawParams& cp = law_.params();
-  const int nt = params_.threads;
+  const double adh = cp.wall_adhesion ? adhesion_scale() : 0.0;
+  const int nt = team();
   for (Wall& w : walls_) {
     w.force.setZero();
     w.torque.setZero();
@@ -233,7 +237,8 @@ void World::wall_forces() {
     std::vector<Vec3> f_t(nt, Vec3::Zero()), tq_t(nt, Vec3::Zero());
     std::vector<double> rad_t(nt, 0.0), ov_t(nt, 0.0);
     std::vector<Index> ovi_t(nt, 0);
-#pragma omp parallel num_threads(nt)
+    // Walls see a small share of the particles; a team pays off only for long contact lists.
+#pragma omp parallel num_threads(nc >= static_cast<long>(kParallelMin) ? nt : 1)
     {
       const int tid = omp_get_thread_num();
       Vec3 fsum = Vec3::Zero(), tsum = Vec3::Zero();
@@ -253,7 +258,7 @@ void World::wall_forces() {
         const double a = p_.r[i] - delta;  // lever arm to the contact point on the wall
         const Vec3 v_rel = p_.v[i] - a * p_.w[i].cross(n_into) - w.surface_velocity(n_into);
         const double vn = v_rel.dot(n_into);
-        ContactKinematics c{delta, vn, v_rel - vn * n_into, n_into, p_.r[i], p_.m[i]};
+        ContactKinematics c{delta, vn, v_rel - vn * n_into, n_into, p_.r[i], p_.m[i], true};
         const ContactForce cf = law_.evaluate(c, wc.h, dt, cp.mu_wall, adh);
         const Vec3 fp = cf.fn * n_into + cf.ft;
         p_.f[i] += fp;

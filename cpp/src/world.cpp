@@ -99,9 +99,14 @@ void World::add_particles(const std::vector<Vec3>& x, const std::vector<double>&
       throw ParameterError(cat("radius[", k, "] = ", r[k], " m: radii must be finite and > 0"));
     if (!x[k].allFinite())
       throw ParameterError(cat("position[", k, "] is not finite"));
-    if (!params_.box.contains(x[k]))
-      throw ParameterError(cat("position[", k, "] = (", x[k].transpose(),
-                               ") m lies outside the domain box"));
+    if (!params_.box.contains(x[k])) {
+      // Name the allowed range: the box, coordinate by coordinate.
+      const Box& b = params_.box;
+      throw ParameterError(cat("position[", k, "] = (", x[k].x(), ", ", x[k].y(), ", ", x[k].z(),
+                               ") m lies outside the domain box: allowed [", b.lo.x(), ", ",
+                               b.hi.x(), "] x [", b.lo.y(), ", ", b.hi.y(), "] x [", b.lo.z(),
+                               ", ", b.hi.z(), "] m"));
+    }
   }
   const double rho = params_.density * params_.density_scale;
   for (std::size_t k = 0; k < x.size(); ++k) {
@@ -165,9 +170,15 @@ double World::critical_time_step() const {
     r_min = std::min(r_min, p_.r[i]);
   }
   const ContactLawParams& c = params_.contact;
-  const double s_wall = c.scale_with_radius ? 2.0 * r_max_ / c.r_ref : 1.0;
-  const double k_eff = s_wall * std::max(c.k2, 3.5 * c.kt_ratio * c.k1);
-  // A wall is a body of infinite mass, so the lightest particle against it is the worst case.
+  const double s_r = c.scale_with_radius ? r_max_ / c.r_ref : 1.0;
+  // A wall contact is stiffness wall_stiffness_factor * s_r * k on one particle (m >= m_min).
+  // A particle pair is at most s_r * k (2 r* / r_ref <= r_max / r_ref when scaled) on the
+  // reduced mass m* = m_i m_j / (m_i + m_j) >= m_min / 2, i.e. like 2 s_r k on m_min: two
+  // free spheres are twice as stiff per unit mass as one sphere on a wall of the same
+  // stiffness. (Without the pair term a wall_stiffness_factor below 2 gave a limit sqrt(2)
+  // too large or more, and a bound pair oscillating at dt just under it blew up.)
+  const double s_eff = std::max(c.wall_stiffness_factor, 2.0) * s_r;
+  const double k_eff = s_eff * std::max(c.k2, 3.5 * c.kt_ratio * c.k1);
   return 2.0 * std::sqrt(m_min / k_eff);
 }
 
@@ -202,7 +213,7 @@ void World::build_wall_lists() {
 }
 
 void World::rebuild() {
-  nbr_.build(p_, params_.box, effective_skin(), r_max_, step_, params_.threads);
+  nbr_.build(p_, params_.box, effective_skin(), r_max_, step_, team());
   build_wall_lists();
   std::copy(p_.x.begin(), p_.x.end(), x_build_.begin());
   list_valid_ = true;
@@ -276,7 +287,7 @@ void World::step() {
   ensure_forces();
   double max_disp2 = 0.0;
   long bad = -1;
-  const int nt = params_.threads;
+  const int nt = team();
 #pragma omp parallel for schedule(static) num_threads(nt) reduction(max : max_disp2) \
     reduction(max : bad)
   for (long i = 0; i < n; ++i) {
@@ -357,7 +368,7 @@ double World::load_marker() const {
 
 double World::kinetic_energy() const {
   const long n = static_cast<long>(p_.size());
-  const int nt = params_.threads;
+  const int nt = team();
   std::vector<double> part(nt, 0.0);
 #pragma omp parallel num_threads(nt)
   {
@@ -388,7 +399,7 @@ double World::potential_energy() const {
     for (const WallContact& wc : w.contacts) {
       Vec3 n_into;
       const double gap = w.gap(p_.x[wc.i], p_.r[wc.i], n_into);
-      if (gap < 0.0) e += law_.stored_energy(-gap, wc.h, p_.r[wc.i]);
+      if (gap < 0.0) e += law_.stored_energy(-gap, wc.h, p_.r[wc.i], true);
     }
   }
   for (const Bond& b : bonds_) {
@@ -448,6 +459,7 @@ long World::create_bonds(const BondParams& bp) {
       b.i = static_cast<Index>(i);
       b.j = j;
       b.n_prev = d / dist;
+      b.step_updated = step_;  // stress-free now: no increment until the next step
       b.radius = bp.radius;
       b.kn = bp.youngs_modulus / rsum;  // eq. 13
       b.kt = bp.kt_ratio * b.kn;

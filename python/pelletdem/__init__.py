@@ -3,9 +3,14 @@
 The C++ engine (``pelletdem._core``) steps; this package arranges stages, scans, fits and
 plots. See the README for the model, its parameters and their sources.
 """
-from importlib.metadata import PackageNotFoundError, version as _version
+import os as _os
 
-from .engine import (  # noqa: F401
+# Threads that spin while they wait starve each other when the machine is shared (a 2-core
+# box running anything else); sleeping waits cost little at the step sizes of a pellet.
+_os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
+from ._version import __version__  # noqa: E402,F401
+from .engine import (  # noqa: F401,E402
     BondLaw,
     ContactLaw,
     NonFiniteError,
@@ -20,8 +25,3 @@ from .engine import (  # noqa: F401
     rayleigh_time_step,
     truncated_normal_radii,
 )
-
-try:
-    __version__ = _version("pelletdem")
-except PackageNotFoundError:  # running from a source tree
-    __version__ = "0.0.0+source"

@@ -35,6 +35,8 @@ class ContactLaw:
     k1, k2, kc: loading, unloading and adhesion stiffness, N/m (Table 4: 1e5, 4e5, 600).
     kt_ratio: tangential stiffness over k1 (the paper: k_t equal to the normal stiffness).
     mu, mu_wall: friction with particles (0.5) and walls (0.15). rolling: m_r of eq. 11 (0.01).
+    wall_adhesion: walls adhere too (off: a withdrawing steel mould must not drag particles).
+    wall_stiffness_factor: wall contact stiffness over a pair's (2: eq. 7 with r* = r at a wall).
     normal_damping_ratio: optional viscous normal damping, fraction of critical (paper: 0).
     scale_with_radius: k scaled by 2 r*/r_ref per pair (eq. 7's proportionality to radius).
     hardening, hardening_exponent: optional stiffening of the loading branch,
@@ -48,6 +50,8 @@ class ContactLaw:
     mu: float = 0.5
     mu_wall: float = 0.15
     rolling: float = 0.01
+    wall_adhesion: bool = False
+    wall_stiffness_factor: float = 2.0
     normal_damping_ratio: float = 0.0
     scale_with_radius: bool = False
     r_ref: float = 2.0e-4

@@ -24,6 +24,13 @@ struct ContactLawParams {
   double mu = 0.5;        // particle-particle friction coefficient
   double mu_wall = 0.15;  // particle-wall friction coefficient
   double rolling = 0.01;  // rolling friction coefficient m_r of eq. 11
+  // Adhesion against walls. The paper's adhesion keeps the pellet's particles glued together;
+  // a steel mould or piston that pulled particles along as it withdrew would tear the pellet's
+  // skin off, so walls do not adhere unless asked to.
+  bool wall_adhesion = false;
+  // Wall stiffness relative to a pair of equal spheres. Eq. 7 (k1 = 5 r* p_y) has r* = r/2 for
+  // two equal spheres and r* = r against a flat rigid wall, so a steel wall is twice as stiff.
+  double wall_stiffness_factor = 2.0;
   // Optional viscous normal damping as a fraction of critical damping on k2. The paper has
   // none (all normal dissipation is hysteretic); 0 keeps eq. 5 exact.
   double normal_damping_ratio = 0.0;
@@ -52,6 +59,7 @@ struct ContactLawParams {
     require_range("mu", mu, 0.0, 10.0);
     require_range("mu_wall", mu_wall, 0.0, 10.0);
     require_range("rolling", rolling, 0.0, 1.0);
+    require_range("wall_stiffness_factor", wall_stiffness_factor, 0.01, 100.0);
     require_range("normal_damping_ratio", normal_damping_ratio, 0.0, 1.0);
     require_positive("r_ref", r_ref, "m");
     require_range("hardening", hardening, 0.0, 1.0e4);
@@ -67,6 +75,7 @@ struct ContactKinematics {
   Vec3 n;            // unit normal from the first body to the second
   double r_eff;      // equivalent radius r*, m
   double m_eff;      // equivalent mass m*, kg
+  bool wall = false; // the first body is a wall
 };
 
 struct ContactForce {
@@ -87,7 +96,9 @@ class HystereticLaw {
 
   const ContactLawParams& params() const { return p_; }
 
-  double stiffness_scale(double r_eff) const {
+  // Factor on k1, k2, kc for one contact. Against a wall r_eff is the particle radius.
+  double stiffness_scale(double r_eff, bool wall) const {
+    if (wall) return p_.wall_stiffness_factor * (p_.scale_with_radius ? r_eff / p_.r_ref : 1.0);
     return p_.scale_with_radius ? 2.0 * r_eff / p_.r_ref : 1.0;
   }
 
@@ -100,8 +111,9 @@ class HystereticLaw {
 
   // Normal force of eq. 5; updates the residual overlap delta0 so the unloading line moves
   // with the history (Walton-Braun with Luding's adhesive branch).
-  double normal_force(double delta, double& delta0, double r_eff, double adhesion_scale) const {
-    const double s = stiffness_scale(r_eff);
+  double normal_force(double delta, double& delta0, double r_eff, double adhesion_scale,
+                      bool wall = false) const {
+    const double s = stiffness_scale(r_eff, wall);
     const double k1 = s * p_.k1, k2 = s * p_.k2, kc = s * p_.kc * adhesion_scale;
     const double f_elastic = k2 * (delta - delta0);
     const double f_load = loading_force(delta, k1, r_eff);
@@ -118,8 +130,8 @@ class HystereticLaw {
 
   ContactForce evaluate(const ContactKinematics& c, ContactHistory& h, double dt, double mu,
                         double adhesion_scale) const {
-    const double s = stiffness_scale(c.r_eff);
-    double fn = normal_force(c.delta, h.delta0, c.r_eff, adhesion_scale);
+    const double s = stiffness_scale(c.r_eff, c.wall);
+    double fn = normal_force(c.delta, h.delta0, c.r_eff, adhesion_scale, c.wall);
     if (p_.normal_damping_ratio > 0.0)
       fn -= p_.normal_damping_ratio * 2.0 * std::sqrt(c.m_eff * s * p_.k2) * c.vn;
     const double kt = s * p_.kt_ratio * p_.k1;
@@ -142,8 +154,9 @@ class HystereticLaw {
   }
 
   // Elastic energy held by a contact, J: what it would give back if unloaded to zero force.
-  double stored_energy(double delta, const ContactHistory& h, double r_eff) const {
-    const double s = stiffness_scale(r_eff);
+  double stored_energy(double delta, const ContactHistory& h, double r_eff,
+                       bool wall = false) const {
+    const double s = stiffness_scale(r_eff, wall);
     const double k2 = s * p_.k2;
     const double f = k2 * (delta - h.delta0);
     double e = (f > 0.0) ? 0.5 * f * f / k2 : 0.0;

@@ -111,6 +111,10 @@ class World {
   void reset_max_overlap_seen() { max_overlap_seen_ = 0.0; }
   double load_marker() const;
   double critical_time_step() const;
+  // Threads a step uses: below kParallelMin particles one thread is faster than a team (the
+  // fork/join and barrier cost exceeds the work), so small systems run serial.
+  static constexpr std::size_t kParallelMin = 2048;
+  int team() const { return p_.size() >= kParallelMin ? params_.threads : 1; }
   double adhesion_scale() const;
   const NeighborList& neighbors() const { return nbr_; }
   long rebuild_count() const { return rebuilds_; }

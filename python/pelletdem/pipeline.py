@@ -1,0 +1,74 @@
+"""A whole pellet's life in one call: fill -> compact -> unload -> demould -> relax -> bond ->
+diametral, returning one Result. `relaxed_pellet` and `break_pellet` split it where the
+calibration branches: everything before bonding does not depend on the bond parameters."""
+from __future__ import annotations
+
+import time
+from dataclasses import asdict
+from typing import Optional, Tuple
+
+from . import stages
+from ._version import __version__
+from .engine import BondLaw, ParameterError
+from .presets import Preset, get_preset
+from .result import Result
+
+
+def bond_law_for(material: str, mc: float, sigma_z_mpa: float, radius: float = 2e-5) -> BondLaw:
+    """The paper's Table 5 bond parameters for one variant (E_b, sigma_c = tau_c in Pa, r_b in m)."""
+    from .measured import variant
+
+    v = variant(material, mc, sigma_z_mpa)
+    return BondLaw(radius=radius, youngs_modulus=v.e_b, sigma_c=v.sigma_c, tau_c=v.sigma_c)
+
+
+def _preset(preset) -> Preset:
+    if isinstance(preset, Preset):
+        return preset
+    return get_preset(preset)
+
+
+def relaxed_pellet(preset="quick", sigma_z: float = 120e6, seed: int = 0, threads: int = 1,
+                   n_particles: Optional[int] = None, progress: Optional[bool] = None):
+    """Fill, compact to `sigma_z` (Pa), unload, demould and relax. Returns (Pellet, Result)
+    with the stages so far; the Pellet's world can be cloned to branch bond-parameter runs."""
+    p = _preset(preset)
+    if not isinstance(threads, int) or not 1 <= threads <= 1024:
+        raise ParameterError(f"threads = {threads!r} is out of range: allowed 1 <= threads <= 1024")
+    res = Result(params={"preset": asdict(p), "sigma_z": sigma_z, "threads": threads,
+                         "n_particles": n_particles}, seed=seed, version=__version__)
+    pellet, st = stages.fill(p, seed=seed, threads=threads, n_particles=n_particles, progress=progress)
+    res.stages["fill"] = st
+    for st in (stages.compact(pellet, sigma_z, progress=progress), stages.unload(pellet, progress=progress),
+               stages.demould(pellet, progress=progress), stages.relax(pellet, progress=progress)):
+        res.stages[st.name] = st
+    res.snapshots.update(pellet.snapshots)
+    return pellet, res
+
+
+def break_pellet(pellet, bond_law: BondLaw, result: Optional[Result] = None,
+                 plate_speed: Optional[float] = None, max_dLD: Optional[float] = None,
+                 progress: Optional[bool] = None) -> Result:
+    """Bond a relaxed pellet and run the diametral test on it. The Pellet is used up (clone its
+    world first to branch). Returns `result` (or a new one) with the bond and diametral stages."""
+    res = result if result is not None else Result(params={}, seed=-1, version=__version__)
+    res.params["bond"] = asdict(bond_law)
+    res.stages["bond"] = stages.bond(pellet, bond_law, progress=progress)
+    res.stages["diametral"] = stages.diametral(pellet, speed=plate_speed, max_dLD=max_dLD, progress=progress)
+    res.snapshots.update(pellet.snapshots)
+    return res
+
+
+def run_pellet(preset="quick", material: str = "oak", mc: float = 8, sigma_z_mpa: float = 120,
+               seed: int = 0, threads: int = 1, bond_law: Optional[BondLaw] = None,
+               n_particles: Optional[int] = None, progress: Optional[bool] = None) -> Result:
+    """Fill to broken pellet for one variant (material, mc in %, sigma_z in MPa). The bond
+    parameters default to the paper's Table 5 values for that variant. Returns the Result."""
+    law = bond_law if bond_law is not None else bond_law_for(material, mc, sigma_z_mpa)
+    t0 = time.perf_counter()
+    pellet, res = relaxed_pellet(preset, sigma_z=sigma_z_mpa * 1e6, seed=seed, threads=threads,
+                                 n_particles=n_particles, progress=progress)
+    res.params.update({"material": material, "mc_percent": mc, "sigma_z_mpa": sigma_z_mpa})
+    break_pellet(pellet, law, res, progress=progress)
+    res.params["total_wall_time_s"] = time.perf_counter() - t0
+    return res

@@ -1,0 +1,160 @@
+"""The paper's figures from a Result (matplotlib, Agg backend when there is no display).
+
+Fig. 5: compaction-unloading sigma_z(dh) and diametral sigma_1(dL/D). Fig. 9: sigma_z(dh/h0).
+Fig. 10: coordination number against BD/BD_w. Fig. 11: sigma_1(dL/D) for several runs and
+sigma_f against CN. Fig. 15: simulated against measured (Table 3 point with SD bars).
+Fig. 16: crack maps (see pelletdem.cracks). Every function returns the matplotlib Figure.
+"""
+from __future__ import annotations
+
+import os
+from typing import Iterable, Optional, Sequence
+
+import numpy as np
+
+
+def _plt():
+    import matplotlib
+
+    if not os.environ.get("DISPLAY") and matplotlib.get_backend().lower() not in ("agg", "module://matplotlib_inline.backend_inline"):
+        matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def fig5_stress_deformation(result, ax=None):
+    """Fig. 5: (a) piston stress sigma_z (MPa) against piston displacement dh (mm), loading and
+    unloading; (b) sigma_1 (MPa) against dL/D in the diametral test."""
+    plt = _plt()
+    fig, (a, b) = plt.subplots(1, 2, figsize=(10, 4)) if ax is None else (ax[0].figure, ax)
+    h0 = result.scalar("fill", "h0")
+    for name, style in (("compact", "-"), ("unload", "--")):
+        if name in result.stages:
+            s = result.stages[name].series
+            a.plot((h0 - s["h"]) * 1e3, s["sigma_z"] / 1e6, style, label=name)
+    a.set_xlabel("piston displacement $\\Delta h$ (mm)")
+    a.set_ylabel("$\\sigma_z$ (MPa)")
+    a.legend()
+    a.set_title("(a) compaction and unloading")
+    if "diametral" in result.stages:
+        s = result.stages["diametral"].series
+        b.plot(s["dL_D"], s["sigma_1"] / 1e6)
+    b.set_xlabel("$\\Delta L/D$")
+    b.set_ylabel("$\\sigma_1$ (MPa)")
+    b.set_title("(b) diametral compression")
+    fig.tight_layout()
+    return fig
+
+
+def fig9_compaction(result, measured: Optional[Sequence] = None, ax=None):
+    """Fig. 9: sigma_z (MPa) against dh/h0 for compaction and unloading; `measured` is an
+    optional list of (label, dh_h0 array, sigma_z Pa array) curves to draw with it."""
+    plt = _plt()
+    fig, ax = (plt.subplots(figsize=(5, 4)) if ax is None else (ax.figure, ax))
+    for name, style in (("compact", "-"), ("unload", "--")):
+        if name in result.stages:
+            s = result.stages[name].series
+            ax.plot(s["dh_h0"], s["sigma_z"] / 1e6, style, label=f"DEM {name}")
+    for label, x, y in measured or []:
+        ax.plot(x, np.asarray(y) / 1e6, "o", ms=3, label=label)
+    ax.set_xlabel("$\\Delta h / h_0$")
+    ax.set_ylabel("$\\sigma_z$ (MPa)")
+    ax.legend()
+    fig.tight_layout()
+    return fig
+
+
+def fig10_coordination(result, bd_wood: float = 675.0, ax=None):
+    """Fig. 10: coordination number against BD_p/BD_w during compaction, with the relaxed
+    pellet as a point; bd_wood is the intact wood's bulk density, kg/m^3 (oak: 675)."""
+    plt = _plt()
+    fig, ax = (plt.subplots(figsize=(5, 4)) if ax is None else (ax.figure, ax))
+    s = result.stages["compact"].series
+    n = min(len(s["bulk_density"]), len(s["coordination_number"]))
+    ax.plot(s["bulk_density"][:n] / bd_wood, s["coordination_number"][:n], label="compaction")
+    if "relax" in result.stages:
+        r = result.stages["relax"].scalars
+        ax.plot([r["bulk_density"] / bd_wood], [r["coordination_number"]], "s", label="relaxed pellet")
+    ax.set_xlabel("$BD_p / BD_w$")
+    ax.set_ylabel("coordination number CN")
+    ax.legend()
+    fig.tight_layout()
+    return fig
+
+
+def fig11_coordination_effect(results: Iterable, ax=None):
+    """Fig. 11: (a) sigma_1(dL/D) of several runs labelled by their relaxed CN; (b) sigma_f
+    (MPa) against CN."""
+    plt = _plt()
+    fig, (a, b) = plt.subplots(1, 2, figsize=(10, 4)) if ax is None else (ax[0].figure, ax)
+    cn, sf = [], []
+    for res in results:
+        c = res.scalar("relax", "coordination_number")
+        s = res.stages["diametral"].series
+        a.plot(s["dL_D"], s["sigma_1"] / 1e6, label=f"CN = {c:.1f}")
+        cn.append(c)
+        sf.append(res.scalar("diametral", "sigma_f") / 1e6)
+    a.set_xlabel("$\\Delta L/D$")
+    a.set_ylabel("$\\sigma_1$ (MPa)")
+    a.legend()
+    b.plot(cn, sf, "o-")
+    b.set_xlabel("CN")
+    b.set_ylabel("$\\sigma_f$ (MPa)")
+    fig.tight_layout()
+    return fig
+
+
+def fig15_fit(result, variant=None, measured_curve=None, ax=None):
+    """Fig. 15: simulated sigma_1(dL/D) (MPa) with the measured tensile strength and
+    deformation at failure (Table 3, mean +- SD bars) of `variant` (a measured.Variant), and
+    an optional measured curve (measured.Curve)."""
+    plt = _plt()
+    fig, ax = (plt.subplots(figsize=(5, 4)) if ax is None else (ax.figure, ax))
+    s = result.stages["diametral"].series
+    ax.plot(s["dL_D"], s["sigma_1"] / 1e6, label="DEM")
+    if measured_curve is not None:
+        ax.plot(measured_curve.x, measured_curve.y / 1e6, ".", ms=2, label="measured")
+    if variant is not None:
+        ax.errorbar([variant.dLf_D], [variant.sigma_f / 1e6], xerr=[variant.dLf_D_sd],
+                    yerr=[variant.sigma_f_sd / 1e6], fmt="ks", capsize=3, label=f"{variant.label} (Table 3)")
+    ax.set_xlabel("$\\Delta L/D$")
+    ax.set_ylabel("$\\sigma_1$ (MPa)")
+    ax.legend()
+    fig.tight_layout()
+    return fig
+
+
+def save_all(result, directory: str, variant=None) -> list:
+    """Write every figure the run covers as PNG files into `directory`; returns the paths."""
+    plt = _plt()
+    os.makedirs(directory, exist_ok=True)
+    out = []
+
+    def save(fig, name):
+        path = os.path.join(directory, name)
+        fig.savefig(path, dpi=120)
+        plt.close(fig)
+        out.append(path)
+
+    if "compact" in result.stages:
+        save(fig5_stress_deformation(result), "fig5_stress_deformation.png")
+        save(fig9_compaction(result), "fig9_compaction.png")
+        bd_w = variant.bd_wood if variant is not None else 675.0
+        save(fig10_coordination(result, bd_wood=bd_w), "fig10_coordination.png")
+    if "diametral" in result.stages:
+        save(fig15_fit(result, variant), "fig15_fit.png")
+        try:
+            from .cracks import plot_crack_maps
+        except ImportError:
+            plot_crack_maps = None
+        if plot_crack_maps is not None:
+            d = result.stages["diametral"]
+            snap = result.snapshots.get("diametral") or result.snapshots.get("bond")
+            broken = {"position": d.series["broken_position"], "mode": d.series["broken_mode"],
+                      "time": d.series["broken_time"], "load_marker": d.series["broken_dL_D"]}
+            path = os.path.join(directory, "fig16_crack_map.png")
+            plot_crack_maps({"broken": broken, "positions": snap["position"], "radii": snap["radius"],
+                             "height": d.scalars["height"]}, path)
+            out.append(path)
+    return out

@@ -1,0 +1,413 @@
+"""The pellet's life (section 3.1.3) as stages over one C++ world.
+
+fill -> compact -> unload -> demould -> relax -> bond -> diametral. Each stage takes the
+`Pellet` (the world and its geometry) and its own parameters, runs in C++ until its stop
+condition, and returns a `StageResult` with its time series and scalars in SI units.
+Geometry: the mould axis is z, the floor is the plane z = 0, the piston a plane moving down;
+in the diametral test the plates are planes normal to y, moving towards each other.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Dict, Optional
+
+import numpy as np
+
+from .engine import BondLaw, ParameterError, World, random_pack_cylinder, truncated_normal_radii
+from .presets import Preset
+
+
+@dataclass
+class StageResult:
+    """What one stage measured: time series (numpy arrays) and scalars, SI units."""
+
+    name: str
+    series: Dict[str, np.ndarray] = field(default_factory=dict)
+    scalars: Dict[str, float] = field(default_factory=dict)
+    wall_time_s: float = 0.0
+    steps: int = 0
+
+
+@dataclass
+class Pellet:
+    """The world plus the geometry the stages share (wall indices, heights, masses)."""
+
+    world: World
+    preset: Preset
+    walls: Dict[str, int]
+    mould_radius: float
+    mass: float                 # unscaled sawdust mass, kg
+    h0: float = float("nan")    # bed height after filling, m
+    diameter: float = float("nan")  # relaxed pellet diameter, m
+    height: float = float("nan")    # relaxed pellet height, m
+    snapshots: Dict[str, dict] = field(default_factory=dict)
+
+    def snapshot(self, stage: str) -> None:
+        """Keep the particles' state at the end of `stage` (positions, velocities, forces)."""
+        w = self.world
+        self.snapshots[stage] = {
+            "position": np.array(w.x), "velocity": np.array(w.v), "angular_velocity": np.array(w.w),
+            "force": np.array(w.f), "radius": np.array(w.r), "time": w.time,
+        }
+
+
+class _Progress:
+    """A tqdm bar fed by the engine's chunk callback; silent off a terminal or when asked."""
+
+    def __init__(self, desc: str, total: int, enabled: Optional[bool]):
+        self.bar = None
+        if enabled is False:
+            return
+        try:
+            from tqdm.auto import tqdm
+        except ImportError:  # tqdm is a dependency, but a bar is never worth a crash
+            return
+        self.bar = tqdm(total=total, desc=desc, unit="step", disable=None if enabled is None else not enabled,
+                        leave=False, dynamic_ncols=True)
+        self.last = 0
+
+    def __call__(self, done: int) -> None:
+        if self.bar is not None:
+            self.bar.update(done - self.last)
+            self.last = done
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+
+
+def _run(pellet: Pellet, name: str, max_steps: int, progress, **conditions):
+    bar = _Progress(name, max_steps, progress)
+    try:
+        return pellet.world.run_until(max_steps=max_steps, progress=bar, **conditions)
+    finally:
+        bar.close()
+
+
+def _sample_every(pellet: Pellet, expected_steps: float) -> None:
+    n = max(1, int(expected_steps / max(pellet.preset.sample_points, 1)))
+    pellet.world.set_sample_interval(n)
+    pellet.world.clear_samples()
+
+
+def _check_positive(name: str, value: float, unit: str) -> float:
+    if not (isinstance(value, (int, float, np.floating)) and math.isfinite(value) and value > 0):
+        raise ParameterError(f"{name} = {value!r} {unit} must be a finite number > 0")
+    return float(value)
+
+
+def pellet_extent(world: World) -> tuple:
+    """(diameter, height, centre x, centre y) of the particle assembly, m."""
+    x = np.asarray(world.x)
+    r = np.asarray(world.r)
+    cx, cy = x[:, 0].mean(), x[:, 1].mean()
+    rho = np.hypot(x[:, 0] - cx, x[:, 1] - cy) + r
+    height = (x[:, 2] + r).max() - (x[:, 2] - r).min()
+    return 2.0 * rho.max(), height, cx, cy
+
+
+# --- fill ------------------------------------------------------------------------------------
+
+def fill(preset: Preset, seed: int = 0, threads: int = 1, n_particles: Optional[int] = None,
+         mass: Optional[float] = None, progress: Optional[bool] = None):
+    """Random non-overlapping generation in the mould and settling.
+
+    Give either `n_particles` or the sawdust `mass` (kg, unscaled; 0.5 g in the paper); the
+    preset's count otherwise. Settling runs with gravity raised by preset.fill_gravity_factor
+    (only the resting structure matters and scaled gravity would need ~10^6 steps to drop the
+    bed), then gravity returns to 9.81/density_scale. Measures h0 (m) and the initial bulk
+    density BD_s (kg/m^3). Returns (Pellet, StageResult).
+    """
+    t0 = time.perf_counter()
+    if n_particles is not None and mass is not None:
+        raise ParameterError("give n_particles or mass, not both")
+    r_mean = preset.radius_mean
+    mean_volume = 4.0 / 3.0 * math.pi * (r_mean**3 + 3.0 * r_mean * preset.radius_sd**2)
+    if mass is not None:
+        _check_positive("mass", mass, "kg")
+        n_particles = int(round(mass / (preset.density * mean_volume)))
+    n = preset.n_particles if n_particles is None else n_particles
+    if not (isinstance(n, (int, np.integer)) and 1 <= n <= 10_000_000):
+        raise ParameterError(f"n_particles = {n!r} is out of range: allowed 1 <= n_particles <= 1e7")
+    R = 0.5 * preset.mould_diameter
+    radii = truncated_normal_radii(n, preset.radius_mean, preset.radius_sd, preset.radius_min,
+                                   preset.radius_max, seed=seed)
+    solid = float(np.sum(4.0 / 3.0 * math.pi * radii**3))
+    fill_height = solid / (preset.fill_solid_fraction * math.pi * R * R)
+    x, radii = random_pack_cylinder(radii, radius=R - 1e-9, z_lo=0.0, z_hi=fill_height, seed=seed + 1)
+    margin = 0.6 * R + 4.0 * preset.radius_max
+    box = ((-R - margin, -R - margin, -4.0 * preset.radius_max),
+           (R + margin, R + margin, fill_height + 10.0 * preset.radius_max))
+    world = World(dt=preset.dt, box=box, contact=preset.contact, density=preset.density,
+                  density_scale=preset.density_scale, gravity=(0.0, 0.0, -9.81), threads=threads,
+                  skin=0.1 * preset.radius_mean, max_overlap_ratio=preset.max_overlap_ratio)
+    world.add_particles(x, radii)
+    walls = {
+        "floor": world.add_plane("floor", (0.0, 0.0, 0.0), (0.0, 0.0, 1.0)),
+        "mould": world.add_cylinder("mould", (0.0, 0.0, 0.0), R),
+        "piston": world.add_plane("piston", (0.0, 0.0, fill_height + 2.0 * preset.radius_max), (0.0, 0.0, -1.0)),
+    }
+    masses = np.asarray(world.m)
+    pellet = Pellet(world, preset, walls, R, float(masses.sum() / preset.density_scale))
+    # Free fall of the bed under g takes sqrt(2 h / g); allow four times that.
+    world.gravity = (0.0, 0.0, -9.81 * preset.fill_gravity_factor / 1.0)
+    g_eff = 9.81 * preset.fill_gravity_factor / preset.density_scale
+    t_fall = math.sqrt(2.0 * fill_height / g_eff)
+    max_steps = int(6.0 * t_fall / preset.dt)
+    _sample_every(pellet, max_steps)
+    # At rest: mean speed below 1 mm/s (the boosted weight compresses contacts by < 1% of r).
+    ke_rest = 0.5 * masses.sum() * 1e-3**2
+    out = _run(pellet, "fill", max_steps, progress, kinetic_energy_below=ke_rest, check_interval=100)
+    world.gravity = (0.0, 0.0, -9.81)
+    s = world.samples()
+    xs, rs = np.asarray(world.x), np.asarray(world.r)
+    pellet.h0 = float((xs[:, 2] + rs).max())
+    bd_s = pellet.mass / (math.pi * R * R * pellet.h0)
+    world.set_wall_point(walls["piston"], (0.0, 0.0, pellet.h0 + 1e-6))
+    pellet.snapshot("fill")
+    res = StageResult("fill", series={"time": s["time"], "kinetic_energy": s["kinetic_energy"],
+                                      "coordination_number": s["coordination_number"]},
+                      scalars={"n_particles": float(world.n), "h0": pellet.h0,
+                               "bulk_density": bd_s, "mass": pellet.mass,
+                               "solid_fraction": solid / (math.pi * R * R * pellet.h0),
+                               "settled": float(out.reason == "kinetic_energy_below"),
+                               "coordination_number": world.coordination_number()},
+                      wall_time_s=time.perf_counter() - t0, steps=out.steps)
+    return pellet, res
+
+
+# --- compact / unload -----------------------------------------------------------------------
+
+def _piston_series(pellet: Pellet) -> dict:
+    w = pellet.world
+    piston = w.wall_samples(pellet.walls["piston"])
+    mould = w.wall_samples(pellet.walls["mould"])
+    glob = w.samples()
+    area = math.pi * pellet.mould_radius**2
+    h = piston["point"][:, 2]
+    sigma_z = piston["normal_force"] / area
+    bd = pellet.mass / (area * h)
+    return {"time": piston["time"], "sigma_z": sigma_z, "h": h, "dh_h0": (pellet.h0 - h) / pellet.h0,
+            "bulk_density": bd, "coordination_number": glob["coordination_number"],
+            "mould_radial_force": mould["normal_force"], "max_overlap_ratio": glob["max_overlap_ratio"],
+            "kinetic_energy": glob["kinetic_energy"]}
+
+
+def inertia_number(strain_rate, d_mean: float, density: float, pressure) -> np.ndarray:
+    """I = strain_rate d sqrt(rho / p) (dimensionless); inf where p <= 0."""
+    p = np.asarray(pressure, dtype=float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(p > 0, np.asarray(strain_rate) * d_mean * np.sqrt(density / np.where(p > 0, p, 1.0)), np.inf)
+
+
+def compact(pellet: Pellet, sigma_z: float, speed: Optional[float] = None,
+            progress: Optional[bool] = None) -> StageResult:
+    """Piston down at `speed` (m/s) until the piston stress F / (pi R_c^2) reaches sigma_z (Pa).
+
+    Records sigma_z against dh/h0, bulk density against sigma_z, coordination number against
+    density, the inertia number, and the largest overlap ratio seen (particles and walls).
+    """
+    t0 = time.perf_counter()
+    _check_positive("sigma_z", sigma_z, "Pa")
+    if sigma_z > 1e9:
+        raise ParameterError(f"sigma_z = {sigma_z} Pa is out of range: allowed 0 < sigma_z <= 1e9 Pa")
+    v = _check_positive("speed", pellet.preset.piston_speed if speed is None else speed, "m/s")
+    w, pid = pellet.world, pellet.walls["piston"]
+    area = math.pi * pellet.mould_radius**2
+    max_steps = int(pellet.h0 / (v * w.dt)) + 1
+    _sample_every(pellet, 0.6 * max_steps)
+    w.reset_max_overlap_seen()
+    w.set_wall_velocity(pid, (0.0, 0.0, -v))
+    out = _run(pellet, "compact", max_steps, progress, wall_force_above=(pid, sigma_z * area))
+    w.set_wall_velocity(pid, (0.0, 0.0, 0.0))
+    w.record_sample()
+    s = _piston_series(pellet)
+    scaled_density = pellet.preset.density * pellet.preset.density_scale
+    s["inertia_number"] = inertia_number(v / s["h"], 2 * pellet.preset.radius_mean, scaled_density, s["sigma_z"])
+    reached = out.reason == "wall_force_above"
+    pellet.snapshot("compact")
+    return StageResult("compact", series=s, scalars={
+        "sigma_z_target": sigma_z, "sigma_z_reached": float(w.wall_state(pid)["normal_force"] / area),
+        "reached": float(reached), "h_min": float(s["h"][-1]), "dh_h0_max": float(s["dh_h0"][-1]),
+        "bulk_density_max": float(s["bulk_density"][-1]),
+        "coordination_number_max": float(w.coordination_number()),
+        "max_overlap_ratio": float(w.max_overlap_ratio_seen), "piston_speed": v,
+        "inertia_number_at_target": float(s["inertia_number"][-1])},
+        wall_time_s=time.perf_counter() - t0, steps=out.steps)
+
+
+def unload(pellet: Pellet, speed: Optional[float] = None, progress: Optional[bool] = None) -> StageResult:
+    """Piston back up at `speed` (m/s) until it carries no load, then clear of the pellet."""
+    t0 = time.perf_counter()
+    v = _check_positive("speed", pellet.preset.unload_speed if speed is None else speed, "m/s")
+    w, pid = pellet.world, pellet.walls["piston"]
+    h_start = w.wall_state(pid)["point"][2]
+    max_steps = int(h_start / (v * w.dt)) + 1
+    _sample_every(pellet, 0.05 * max_steps)
+    w.set_wall_velocity(pid, (0.0, 0.0, v))
+    # Released when the piston carries less than 1e-4 of its peak load (a particle grazing
+    # the piston keeps an exact zero from ever being reached).
+    f_peak = max(w.wall_state(pid)["normal_force"], 0.0)
+    out = _run(pellet, "unload", max_steps, progress, wall_force_below=(pid, 1e-4 * f_peak))
+    # Adhesion can hold the piston a little longer; lift it clear by two radii.
+    clear = int(2.0 * pellet.preset.radius_max / (v * w.dt)) + 1
+    out2 = _run(pellet, "unload (clear)", clear, progress)
+    w.set_wall_velocity(pid, (0.0, 0.0, 0.0))
+    w.set_wall_active(pid, False)
+    s = _piston_series(pellet)
+    pellet.snapshot("unload")
+    return StageResult("unload", series=s, scalars={"h_at_release": float(s["h"][-1]),
+                                                    "released": float(out.reason == "wall_force_below")},
+                       wall_time_s=time.perf_counter() - t0, steps=out.steps + out2.steps)
+
+
+def demould(pellet: Pellet, rate: Optional[float] = None, progress: Optional[bool] = None) -> StageResult:
+    """Mould radius grows at `rate` (m/s) by two particle diameters, then the mould is removed."""
+    t0 = time.perf_counter()
+    rate = _check_positive("rate", pellet.preset.demould_rate if rate is None else rate, "m/s")
+    w, mid = pellet.world, pellet.walls["mould"]
+    grow = 4.0 * pellet.preset.radius_max
+    steps = int(grow / (rate * w.dt)) + 1
+    _sample_every(pellet, steps)
+    w.set_wall_radius_rate(mid, rate)
+    out = _run(pellet, "demould", steps, progress)
+    w.set_wall_radius_rate(mid, 0.0)
+    w.set_wall_active(mid, False)
+    ms = w.wall_samples(mid)
+    pellet.snapshot("demould")
+    return StageResult("demould", series={"time": ms["time"], "radial_force": ms["normal_force"],
+                                          "radius": ms["radius"]},
+                       scalars={"final_radius": float(w.wall_state(mid)["radius"])},
+                       wall_time_s=time.perf_counter() - t0, steps=out.steps)
+
+
+def relax(pellet: Pellet, ke_threshold: Optional[float] = None, max_time: Optional[float] = None,
+          progress: Optional[bool] = None) -> StageResult:
+    """Run until the kinetic energy (with the scaled mass) is below `ke_threshold` (J).
+
+    Reports the relaxed pellet's height and diameter (m), bulk density (kg/m^3, unscaled mass),
+    and coordination number. `max_time` (s) bounds the stage; `converged` says which ended it.
+    """
+    t0 = time.perf_counter()
+    ke = _check_positive("ke_threshold", pellet.preset.ke_threshold if ke_threshold is None else ke_threshold, "J")
+    tmax = _check_positive("max_time", pellet.preset.relax_max_time if max_time is None else max_time, "s")
+    w = pellet.world
+    max_steps = int(tmax / w.dt) + 1
+    _sample_every(pellet, max_steps / 4)
+    out = _run(pellet, "relax", max_steps, progress, kinetic_energy_below=ke, check_interval=50)
+    w.record_sample()
+    s = w.samples()
+    d, h, cx, cy = pellet_extent(w)
+    pellet.diameter, pellet.height = d, h
+    bd = pellet.mass / (math.pi * 0.25 * d * d * h)
+    pellet.snapshot("relax")
+    return StageResult("relax", series={"time": s["time"], "kinetic_energy": s["kinetic_energy"],
+                                        "coordination_number": s["coordination_number"]},
+                       scalars={"height": h, "diameter": d, "bulk_density": bd,
+                                "coordination_number": w.coordination_number(),
+                                "kinetic_energy": w.kinetic_energy(),
+                                "converged": float(out.reason == "kinetic_energy_below")},
+                       wall_time_s=time.perf_counter() - t0, steps=out.steps)
+
+
+# --- bond / diametral -------------------------------------------------------------------------
+
+def largest_cluster_fraction(n: int, i: np.ndarray, j: np.ndarray) -> float:
+    """Fraction of the n particles in the largest group connected through the pairs (i, j)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    if n == 0:
+        return 0.0
+    g = coo_matrix((np.ones(len(i)), (i, j)), shape=(n, n))
+    _, labels = connected_components(g, directed=False)
+    return float(np.bincount(labels).max() / n)
+
+
+def bond(pellet: Pellet, law: BondLaw, ramp_time: Optional[float] = None,
+         progress: Optional[bool] = None) -> StageResult:
+    """Parallel bonds on the relaxed pellet's contacts; adhesion then ramps to zero over
+    `ramp_time` (s) and the pellet settles on its bonds for as long again."""
+    t0 = time.perf_counter()
+    tr = _check_positive("ramp_time", pellet.preset.bond_ramp_time if ramp_time is None else ramp_time, "s")
+    w = pellet.world
+    core_law = law.to_core()  # validates before any work
+    n_bonds = w.create_bonds(core_law)
+    w.set_adhesion_ramp(w.time, tr)
+    steps = int(2.0 * tr / w.dt) + 1
+    _sample_every(pellet, steps)
+    out = _run(pellet, "bond", steps, progress)
+    b = w.bonds()
+    intact = b["mode"] == 0
+    frac = largest_cluster_fraction(w.n, b["i"][intact], b["j"][intact])
+    d, h, _, _ = pellet_extent(w)
+    pellet.diameter, pellet.height = d, h
+    pellet.snapshot("bond")
+    s = w.samples()
+    return StageResult("bond", series={"time": s["time"], "kinetic_energy": s["kinetic_energy"],
+                                       "n_bonds_intact": s["n_bonds_intact"]},
+                       scalars={"n_bonds": float(n_bonds), "bonds_per_particle": 2.0 * n_bonds / w.n,
+                                "largest_cluster_fraction": frac,
+                                "broken_during_ramp": float(len(w.broken_bonds()["i"])),
+                                "height": h, "diameter": d},
+                       wall_time_s=time.perf_counter() - t0, steps=out.steps)
+
+
+def diametral(pellet: Pellet, speed: Optional[float] = None, max_dLD: Optional[float] = None,
+              progress: Optional[bool] = None) -> StageResult:
+    """Diametral compression between two plates parallel to the pellet's axis.
+
+    Both plates move towards each other at speed/2 (m/s) so the pellet stays centred; dL is
+    their approach. Records sigma_1 = P / (pi R_p h_p) (eq. 4, Pa) against dL/D, the tensile
+    strength sigma_f (the peak, Pa), dL_f/D, and broken bonds against dL/D.
+    """
+    t0 = time.perf_counter()
+    v = _check_positive("speed", pellet.preset.plate_speed if speed is None else speed, "m/s")
+    dld = _check_positive("max_dLD", pellet.preset.max_dLD if max_dLD is None else max_dLD, "")
+    if dld > 0.5:
+        raise ParameterError(f"max_dLD = {dld} is out of range: allowed 0 < max_dLD <= 0.5")
+    w = pellet.world
+    w.set_wall_active(pellet.walls["floor"], False)
+    w.gravity = (0.0, 0.0, 0.0)  # the pellet lies between the plates; its weight is negligible
+    d, h, cx, cy = pellet_extent(w)
+    x, r = np.asarray(w.x), np.asarray(w.r)
+    y_lo, y_hi = float((x[:, 1] - r).min()), float((x[:, 1] + r).max())
+    if "plate_low" not in pellet.walls:
+        pellet.walls["plate_low"] = w.add_plane("plate_low", (cx, y_lo, 0.0), (0.0, 1.0, 0.0))
+        pellet.walls["plate_high"] = w.add_plane("plate_high", (cx, y_hi, 0.0), (0.0, -1.0, 0.0))
+    lo, hi = pellet.walls["plate_low"], pellet.walls["plate_high"]
+    w.set_load_walls([lo, hi])
+    w.set_wall_velocity(lo, (0.0, 0.5 * v, 0.0))
+    w.set_wall_velocity(hi, (0.0, -0.5 * v, 0.0))
+    marker0 = w.load_marker
+    target = dld * d
+    max_steps = int(target / (v * w.dt)) + 1
+    _sample_every(pellet, max_steps)
+    n_broken0 = len(w.broken_bonds()["i"])
+    out = _run(pellet, "diametral", max_steps + 10, progress, load_marker_above=marker0 + target)
+    w.set_wall_velocity(lo, (0.0, 0.0, 0.0))
+    w.set_wall_velocity(hi, (0.0, 0.0, 0.0))
+    sl, sh, g = w.wall_samples(lo), w.wall_samples(hi), w.samples()
+    P = 0.5 * (sl["normal_force"] + sh["normal_force"])
+    sigma_1 = P / (math.pi * 0.5 * d * h)
+    dL_D = (g["load_marker"] - marker0) / d
+    k = int(np.argmax(sigma_1)) if len(sigma_1) else 0
+    broken = w.broken_bonds()
+    sel = slice(n_broken0, None)
+    strain_rate = v / d
+    scaled_density = pellet.preset.density * pellet.preset.density_scale
+    pellet.snapshot("diametral")
+    return StageResult("diametral", series={
+        "time": g["time"], "dL_D": dL_D, "sigma_1": sigma_1, "plate_force": P,
+        "n_bonds_broken": g["n_bonds_broken"] - n_broken0, "kinetic_energy": g["kinetic_energy"],
+        "inertia_number": inertia_number(strain_rate, 2 * pellet.preset.radius_mean, scaled_density, sigma_1),
+        "broken_time": broken["time"][sel], "broken_position": broken["position"][sel],
+        "broken_mode": broken["mode"][sel], "broken_dL_D": (broken["load_marker"][sel] - marker0) / d},
+        scalars={"sigma_f": float(sigma_1[k]) if len(sigma_1) else float("nan"),
+                 "dLf_D": float(dL_D[k]) if len(sigma_1) else float("nan"),
+                 "diameter": d, "height": h, "plate_speed": v,
+                 "bonds_broken": float(len(broken["i"]) - n_broken0),
+                 "bonds_intact": float(w.intact_bond_count())},
+        wall_time_s=time.perf_counter() - t0, steps=out.steps)

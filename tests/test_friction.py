@@ -1,0 +1,155 @@
+"""Coulomb friction (eq. 9) and rolling friction (eq. 11) against textbook mechanics.
+
+Gravity: the engine divides physical gravity by density_scale (1e4 here). These tests pass
+1e4 times 9.81 m/s^2 so that the effective gravity g is 9.81 m/s^2 and a sphere slides or
+rolls a measurable amount in a few thousand steps; the results depend only on g.
+"""
+
+import math
+
+import numpy as np
+import pytest
+
+import pelletdem as pd
+
+R = 2.0e-4   # sphere radius, m
+G = 9.81     # effective gravity, m/s^2
+SW = 2.0     # wall stiffness factor, set explicitly (the results do not depend on it)
+
+
+def sphere_on_floor(law, dt, sample_interval=1):
+    """One sphere resting on a floor at z = 0, placed at the equilibrium overlap m g / (SW k1)."""
+    w = pd.World(dt=dt, box=((-1e-3, -1e-3, -1e-3), (5e-2, 1e-3, 1e-3)), contact=law,
+                 gravity=(0, 0, -G * 1e4), skin=2e-5, sample_interval=sample_interval)
+    w.add_particles(np.zeros((1, 3)), np.array([R]))
+    m = w.masses()[0]
+    floor = w.add_plane("floor", [0, 0, -R + m * G / (SW * law.k1)], [0, 0, 1])
+    return w, floor, m
+
+
+@pytest.mark.parametrize("mu_wall", [0.15, 0.4])
+def test_sliding_sphere_friction_saturates_at_mu_wall_fn(mu_wall):
+    """A sphere launched without spin slides, then rolls.
+
+    While it slides the friction force is mu_wall m g: v = v0 - mu_wall g t and the spin grows
+    as r dw/dt = r^2 mu_wall m g / I = (5/2) mu_wall g. Slip ends when v = r w, at
+    t* = 2 v0 / (7 mu_wall g), with v = (5/7) v0; with no rolling friction it then rolls on.
+    """
+    law = pd.ContactLaw(k1=1e5, k2=4e5, kc=0.0, mu=0.5, mu_wall=mu_wall, rolling=0.0,
+                        wall_stiffness_factor=SW)
+    dt = 1e-6
+    w, floor, m = sphere_on_floor(law, dt)
+    v0 = 0.05
+    w.set_velocities(np.array([[v0, 0, 0]]), np.zeros((1, 3)))
+    t_star = 2 * v0 / (7 * mu_wall * G)
+    w.run(int(1.5 * t_star / dt))
+    s = w.wall_samples(floor)
+    f, t = s["force"], s["time"]
+    tangential = np.hypot(f[:, 0], f[:, 1])
+    normal = -f[:, 2]
+    sliding = t < 0.95 * t_star
+    np.testing.assert_allclose(normal, m * G, rtol=1e-6)
+    np.testing.assert_allclose(tangential[sliding] / normal[sliding], mu_wall, rtol=1e-9)
+    # Friction on the sphere opposes the slip (-x); the reaction on the wall is +x.
+    assert (f[sliding, 0] > 0).all()
+    # Once rolling the friction force drops below its limit and (the tangential spring's
+    # oscillation being damped by eq. 10) dies away.
+    rolling = t > 1.05 * t_star
+    assert (tangential[rolling] < 0.1 * mu_wall * normal[rolling]).all()
+    assert (tangential[t > 1.4 * t_star] < 1e-3 * mu_wall * normal[t > 1.4 * t_star]).all()
+    v = w.velocities()[0]
+    spin = np.array(w.w)[0]
+    assert v[0] == pytest.approx(5 / 7 * v0, rel=1e-3)
+    assert spin[1] * R == pytest.approx(5 / 7 * v0, rel=1e-3)
+
+
+def test_pair_friction_saturates_at_mu_fn():
+    """Two spheres pressed together by two frictionless walls slide past each other.
+
+    Slip u = v_B - v_A - (r w_A + r w_B) x n. While they slip the friction force F = mu f_n acts
+    on both; each sphere's velocity and spin change so that du/dt = -F (2/m)(1 + m r^2/I)
+    = -7 F/m, so slip ends at t* = u0 m / (7 mu f_n). Until then |f_t| = mu f_n exactly, and
+    never more afterwards.
+    """
+    mu = 0.5
+    law = pd.ContactLaw(k1=1e5, k2=4e5, kc=0.0, mu=mu, mu_wall=0.0, rolling=0.0,
+                        wall_stiffness_factor=1.0)
+    dt = 1e-7
+    w = pd.World(dt=dt, box=((-1e-3, -1e-3, -1e-3), (1e-3, 1e-3, 1e-3)), contact=law,
+                 gravity=(0, 0, 0), skin=2e-5)
+    d = 2e-6  # overlap of each of the three contacts: the column starts in equilibrium
+    w.add_particles(np.array([[-R + d / 2, 0, 0], [R - d / 2, 0, 0]]), np.array([R, R]))
+    w.add_plane("left", [-2 * R + 1.5 * d, 0, 0], [1, 0, 0])
+    right = w.add_plane("right", [2 * R - 1.5 * d, 0, 0], [-1, 0, 0])
+    u0 = 0.1
+    w.set_velocities(np.array([[0, u0 / 2, 0], [0, -u0 / 2, 0]]), np.zeros((2, 3)))
+    m = w.masses()[0]
+    fn0 = 1e5 * d
+    t_star = u0 * m / (7 * mu * fn0)
+    rows = []
+    for _ in range(int(2 * t_star / dt)):
+        w.step()
+        x = w.positions()
+        # Pair force on B: its total force less the (purely normal) force of the right wall.
+        pair = np.array(w.f)[1] + np.array(w.wall_state(right)["force"])
+        n = (x[1] - x[0]) / np.linalg.norm(x[1] - x[0])
+        fn = pair @ n
+        ft = np.linalg.norm(pair - fn * n)
+        c = w.contacts()
+        rows.append((w.time, fn, ft, c["fn"][0]))
+    a = np.array(rows)
+    np.testing.assert_allclose(a[:, 1], a[:, 3], rtol=1e-9)  # same f_n as contacts() reports
+    sliding = a[:, 0] < 0.9 * t_star
+    assert sliding.sum() > 100
+    np.testing.assert_allclose(a[sliding, 2] / a[sliding, 1], mu, rtol=1e-9)
+    assert (a[:, 2] <= mu * a[:, 1] * (1 + 1e-12)).all()
+    stuck = a[:, 0] > 1.1 * t_star
+    assert (a[stuck, 2] < 0.95 * mu * a[stuck, 1]).any()  # slip ended near t*
+
+
+@pytest.mark.parametrize("m_r", [0.01, 0.05])
+def test_rolling_sphere_decelerates_as_eq11_predicts(m_r):
+    """A sphere rolling without slipping on a plane, torque of eq. 11 M = -m_r f_n r w/|w|.
+
+    Rolling along +x: v = r w_y. With F the friction force on the sphere along x, applied at
+    the contact point -r z (torque -r F about y) and f_n = m g:
+        m dv/dt = F,   I dw_y/dt = -r F - m_r m g r.
+    Rolling without slipping, dv/dt = r dw_y/dt, so (I/r) dv/dt = -r m dv/dt - m_r m g r and
+        dv/dt = -m_r m g r^2 / (I + m r^2) = -(5/7) m_r g       (I = 2/5 m r^2).
+    The static friction needed, |F| = (5/7) m_r m g, is below mu_wall m g, so it does not slip.
+    """
+    law = pd.ContactLaw(k1=1e5, k2=4e5, kc=0.0, mu=0.5, mu_wall=0.15, rolling=m_r,
+                        wall_stiffness_factor=SW)
+    w, floor, m = sphere_on_floor(law, dt=2e-6, sample_interval=100)
+    v0 = 0.01
+    w.set_velocities(np.array([[v0, 0, 0]]), np.array([[0, v0 / R, 0]]))
+    ts, vs = [], []
+    for _ in range(20):
+        w.run(500)
+        ts.append(w.time)
+        vs.append(w.velocities()[0, 0])
+    a = np.polyfit(ts, vs, 1)[0]
+    assert a == pytest.approx(-5 / 7 * m_r * G, rel=2e-3)
+    # Still rolling without slipping at the end.
+    assert np.array(w.w)[0, 1] * R == pytest.approx(vs[-1], rel=1e-3)
+    # Friction on the sphere is m dv/dt = -(5/7) m_r m g; its reaction drags the wall along +x.
+    fx = w.wall_samples(floor)["force"][5:, 0]
+    np.testing.assert_allclose(fx, 5 / 7 * m_r * m * G, rtol=1e-3)
+
+
+def test_rolling_friction_stops_a_sphere_and_holds_it_still():
+    # Without the cap on the rolling torque a resting sphere would chatter about w = 0; with it
+    # the sphere comes to rest at t = v0 / ((5/7) m_r g) and stays there.
+    m_r = 0.2
+    law = pd.ContactLaw(k1=1e5, k2=4e5, kc=0.0, mu=0.5, mu_wall=0.5, rolling=m_r,
+                        wall_stiffness_factor=SW)
+    dt = 2e-6
+    w, floor, m = sphere_on_floor(law, dt=dt)
+    v0 = 0.002
+    w.set_velocities(np.array([[v0, 0, 0]]), np.array([[0, v0 / R, 0]]))
+    t_stop = v0 / (5 / 7 * m_r * G)
+    w.run(int(0.5 * t_stop / dt))
+    assert w.velocities()[0, 0] == pytest.approx(0.5 * v0, rel=0.02)
+    w.run(int(1.0 * t_stop / dt))
+    assert abs(w.velocities()[0, 0]) < 1e-3 * v0
+    assert abs(np.array(w.w)[0, 1]) * R < 1e-3 * v0
