@@ -151,6 +151,164 @@ py::tuple run_chunked(World& w, std::vector<StopCondition> conds, long max_steps
   }
 }
 
+// --- state <-> dict of numpy arrays (checkpoints, branching runs across processes) ---------
+template <class T>
+std::vector<T> from_array(const py::dict& d, const char* key) {
+  if (!d.contains(key)) throw ParameterError(cat("state: missing '", key, "'"));
+  auto a = py::array_t<T, py::array::c_style | py::array::forcecast>::ensure(d[key]);
+  if (!a) throw ParameterError(cat("state: '", key, "' is not a numeric array"));
+  return std::vector<T>(a.data(), a.data() + a.size());
+}
+
+std::vector<Vec3> vec3_from(const py::dict& d, const char* key) {
+  auto flat = from_array<double>(d, key);
+  if (flat.size() % 3 != 0) throw ParameterError(cat("state: '", key, "' must have shape (N, 3)"));
+  std::vector<Vec3> out(flat.size() / 3);
+  for (std::size_t k = 0; k < out.size(); ++k) out[k] = Vec3(flat[3 * k], flat[3 * k + 1], flat[3 * k + 2]);
+  return out;
+}
+
+py::dict wall_to_dict(const Wall& w) {
+  py::dict d;
+  d["name"] = w.name;
+  d["kind"] = w.kind == WallKind::Plane ? "plane" : "cylinder";
+  d["point"] = copy_vec3({w.point});
+  d["normal"] = copy_vec3({w.normal});
+  d["velocity"] = copy_vec3({w.velocity});
+  d["radius"] = w.radius;
+  d["radius_rate"] = w.radius_rate;
+  d["active"] = w.active;
+  d["servo"] = w.servo;
+  d["servo_force"] = w.servo_force;
+  d["servo_gain"] = w.servo_gain;
+  d["servo_max_speed"] = w.servo_max_speed;
+  d["travel"] = w.travel;
+  d["moved_since_build"] = w.moved_since_build;
+  std::vector<Index> ci;
+  std::vector<double> d0;
+  std::vector<Vec3> ft;
+  for (const WallContact& c : w.contacts) { ci.push_back(c.i); d0.push_back(c.h.delta0); ft.push_back(c.h.ft); }
+  d["contact_i"] = copy_vector(ci);
+  d["contact_delta0"] = copy_vector(d0);
+  d["contact_ft"] = copy_vec3(ft);
+  return d;
+}
+
+Wall wall_from_dict(const py::dict& d) {
+  Wall w;
+  w.name = d["name"].cast<std::string>();
+  const std::string kind = d["kind"].cast<std::string>();
+  if (kind != "plane" && kind != "cylinder") throw ParameterError("state: wall kind must be plane or cylinder");
+  w.kind = kind == "plane" ? WallKind::Plane : WallKind::Cylinder;
+  w.point = vec3_from(d, "point").at(0);
+  w.normal = vec3_from(d, "normal").at(0);
+  w.velocity = vec3_from(d, "velocity").at(0);
+  w.radius = d["radius"].cast<double>();
+  w.radius_rate = d["radius_rate"].cast<double>();
+  w.active = d["active"].cast<bool>();
+  w.servo = d["servo"].cast<bool>();
+  w.servo_force = d["servo_force"].cast<double>();
+  w.servo_gain = d["servo_gain"].cast<double>();
+  w.servo_max_speed = d["servo_max_speed"].cast<double>();
+  w.travel = d["travel"].cast<double>();
+  w.moved_since_build = d["moved_since_build"].cast<double>();
+  auto ci = from_array<Index>(d, "contact_i");
+  auto d0 = from_array<double>(d, "contact_delta0");
+  auto ft = vec3_from(d, "contact_ft");
+  if (ci.size() != d0.size() || ci.size() != ft.size()) throw ParameterError("state: wall contact arrays differ in length");
+  for (std::size_t k = 0; k < ci.size(); ++k) w.contacts.push_back(WallContact{ci[k], ContactHistory{d0[k], ft[k]}});
+  return w;
+}
+
+py::dict state_to_dict(const WorldState& s) {
+  py::dict d;
+  d["time"] = s.time; d["step"] = s.step; d["ramp_start"] = s.ramp_start; d["ramp_duration"] = s.ramp_duration;
+  d["max_overlap_seen"] = s.max_overlap_seen; d["forces_valid"] = s.forces_valid;
+  d["x"] = copy_vec3(s.x); d["v"] = copy_vec3(s.v); d["w"] = copy_vec3(s.w); d["f"] = copy_vec3(s.f); d["t"] = copy_vec3(s.t);
+  d["r"] = copy_vector(s.r); d["m"] = copy_vector(s.m);
+  d["contact_i"] = copy_vector(s.ci); d["contact_j"] = copy_vector(s.cj);
+  d["contact_delta0"] = copy_vector(s.c_delta0); d["contact_ft"] = copy_vec3(s.c_ft);
+  py::list walls;
+  for (const Wall& w : s.walls) walls.append(wall_to_dict(w));
+  d["walls"] = walls;
+  d["load_walls"] = copy_vector(s.load_walls);
+  const std::size_t nb = s.bonds.size();
+  std::vector<Index> bi(nb), bj(nb);
+  std::vector<std::uint8_t> mode(nb);
+  std::vector<double> fn(nb), mn(nb), rad(nb), kn(nb), kt(nb), sc(nb), tc(nb);
+  std::vector<Vec3> np_(nb), ft(nb), mt(nb);
+  for (std::size_t k = 0; k < nb; ++k) {
+    const Bond& b = s.bonds[k];
+    bi[k] = b.i; bj[k] = b.j; mode[k] = static_cast<std::uint8_t>(b.mode); fn[k] = b.fn; mn[k] = b.mn;
+    rad[k] = b.radius; kn[k] = b.kn; kt[k] = b.kt; sc[k] = b.sigma_c; tc[k] = b.tau_c;
+    np_[k] = b.n_prev; ft[k] = b.ft; mt[k] = b.mt;
+  }
+  d["bond_i"] = copy_vector(bi); d["bond_j"] = copy_vector(bj); d["bond_mode"] = copy_vector(mode);
+  d["bond_fn"] = copy_vector(fn); d["bond_mn"] = copy_vector(mn); d["bond_radius"] = copy_vector(rad);
+  d["bond_kn"] = copy_vector(kn); d["bond_kt"] = copy_vector(kt); d["bond_sigma_c"] = copy_vector(sc);
+  d["bond_tau_c"] = copy_vector(tc); d["bond_n_prev"] = copy_vec3(np_); d["bond_ft"] = copy_vec3(ft); d["bond_mt"] = copy_vec3(mt);
+  const std::size_t nk = s.broken.size();
+  std::vector<double> kt_(nk), ks(nk), ktau(nk), klm(nk);
+  std::vector<long> kstep(nk);
+  std::vector<Index> ki(nk), kj(nk);
+  std::vector<std::uint8_t> kmode(nk);
+  std::vector<Vec3> kpos(nk);
+  for (std::size_t k = 0; k < nk; ++k) {
+    const BrokenBond& b = s.broken[k];
+    kt_[k] = b.time; kstep[k] = b.step; ki[k] = b.i; kj[k] = b.j; kpos[k] = b.position;
+    kmode[k] = static_cast<std::uint8_t>(b.mode); ks[k] = b.sigma; ktau[k] = b.tau; klm[k] = b.load_marker;
+  }
+  d["broken_time"] = copy_vector(kt_); d["broken_step"] = copy_vector(kstep); d["broken_i"] = copy_vector(ki);
+  d["broken_j"] = copy_vector(kj); d["broken_position"] = copy_vec3(kpos); d["broken_mode"] = copy_vector(kmode);
+  d["broken_sigma"] = copy_vector(ks); d["broken_tau"] = copy_vector(ktau); d["broken_load_marker"] = copy_vector(klm);
+  return d;
+}
+
+WorldState state_from_dict(const py::dict& d) {
+  WorldState s;
+  s.time = d["time"].cast<double>(); s.step = d["step"].cast<long>();
+  s.ramp_start = d["ramp_start"].cast<double>(); s.ramp_duration = d["ramp_duration"].cast<double>();
+  s.max_overlap_seen = d["max_overlap_seen"].cast<double>(); s.forces_valid = d["forces_valid"].cast<bool>();
+  s.x = vec3_from(d, "x"); s.v = vec3_from(d, "v"); s.w = vec3_from(d, "w"); s.f = vec3_from(d, "f"); s.t = vec3_from(d, "t");
+  s.r = from_array<double>(d, "r"); s.m = from_array<double>(d, "m");
+  s.ci = from_array<Index>(d, "contact_i"); s.cj = from_array<Index>(d, "contact_j");
+  s.c_delta0 = from_array<double>(d, "contact_delta0"); s.c_ft = vec3_from(d, "contact_ft");
+  for (auto item : d["walls"].cast<py::list>()) s.walls.push_back(wall_from_dict(item.cast<py::dict>()));
+  s.load_walls = from_array<int>(d, "load_walls");
+  auto bi = from_array<Index>(d, "bond_i"), bj = from_array<Index>(d, "bond_j");
+  auto mode = from_array<std::uint8_t>(d, "bond_mode");
+  auto fn = from_array<double>(d, "bond_fn"), mn = from_array<double>(d, "bond_mn"), rad = from_array<double>(d, "bond_radius");
+  auto kn = from_array<double>(d, "bond_kn"), kt = from_array<double>(d, "bond_kt");
+  auto sc = from_array<double>(d, "bond_sigma_c"), tc = from_array<double>(d, "bond_tau_c");
+  auto np_ = vec3_from(d, "bond_n_prev"), ft = vec3_from(d, "bond_ft"), mt = vec3_from(d, "bond_mt");
+  const std::size_t nb = bi.size();
+  for (auto* v : {&bj}) if (v->size() != nb) throw ParameterError("state: bond arrays differ in length");
+  if (mode.size() != nb || fn.size() != nb || mn.size() != nb || rad.size() != nb || kn.size() != nb || kt.size() != nb ||
+      sc.size() != nb || tc.size() != nb || np_.size() != nb || ft.size() != nb || mt.size() != nb)
+    throw ParameterError("state: bond arrays differ in length");
+  for (std::size_t k = 0; k < nb; ++k) {
+    if (mode[k] > 2) throw ParameterError("state: bond mode must be 0, 1 or 2");
+    Bond b;
+    b.i = bi[k]; b.j = bj[k]; b.mode = static_cast<BondMode>(mode[k]); b.fn = fn[k]; b.mn = mn[k];
+    b.radius = rad[k]; b.kn = kn[k]; b.kt = kt[k]; b.sigma_c = sc[k]; b.tau_c = tc[k];
+    b.n_prev = np_[k]; b.ft = ft[k]; b.mt = mt[k];
+    s.bonds.push_back(b);
+  }
+  auto kt_ = from_array<double>(d, "broken_time");
+  auto kstep = from_array<long>(d, "broken_step");
+  auto ki = from_array<Index>(d, "broken_i"), kj = from_array<Index>(d, "broken_j");
+  auto kpos = vec3_from(d, "broken_position");
+  auto kmode = from_array<std::uint8_t>(d, "broken_mode");
+  auto ks = from_array<double>(d, "broken_sigma"), ktau = from_array<double>(d, "broken_tau"), klm = from_array<double>(d, "broken_load_marker");
+  const std::size_t nk = kt_.size();
+  if (kstep.size() != nk || ki.size() != nk || kj.size() != nk || kpos.size() != nk || kmode.size() != nk ||
+      ks.size() != nk || ktau.size() != nk || klm.size() != nk)
+    throw ParameterError("state: broken-bond arrays differ in length");
+  for (std::size_t k = 0; k < nk; ++k)
+    s.broken.push_back(BrokenBond{kt_[k], kstep[k], ki[k], kj[k], kpos[k], static_cast<BondMode>(kmode[k]), ks[k], ktau[k], klm[k]});
+  return s;
+}
+
 }  // namespace
 
 PYBIND11_MODULE(_core, m) {
@@ -232,6 +390,10 @@ PYBIND11_MODULE(_core, m) {
   py::class_<World>(m, "World")
       .def(py::init<const WorldParams&>(), py::arg("params"))
       .def("clone", &World::clone)
+      .def("get_state", [](const World& w) { return state_to_dict(w.save_state()); },
+           "The whole state as a dict of numpy arrays (see pelletdem.checkpoint).")
+      .def("set_state", [](World& w, const py::dict& d) { w.load_state(state_from_dict(d)); },
+           "Restore a state from get_state() into a world built with the same parameters.")
       .def("add_particles",
            [](World& w, const py::object& x, const py::object& r) {
              w.add_particles(to_vec3_array(x, "positions"), to_vector(r, "radii"));

@@ -54,6 +54,8 @@ def main(argv=None) -> int:
             ap.error(f"--threads = {args.threads} must be >= 1")
         if args.particles is not None and args.particles < 1:
             ap.error(f"--particles = {args.particles} must be >= 1")
+        if args.seed < 0:
+            ap.error(f"--seed = {args.seed} must be >= 0")
         return _run(args)
     return 2
 

@@ -6,7 +6,7 @@ steps in C++ and returns when a condition evaluated there fires.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, fields
+from dataclasses import asdict, dataclass, field, fields
 from typing import Callable, Optional, Sequence
 
 import numpy as np
@@ -131,12 +131,18 @@ class World:
                  contact: Optional[ContactLaw] = None, density: float = 680.0,
                  density_scale: float = 1e4, gravity=(0.0, 0.0, -9.81), skin: float = 0.0,
                  threads: int = 1, max_overlap_ratio: float = 0.9, sample_interval: int = 100):
+        contact = contact or ContactLaw()
+        # Kept so that a saved state can rebuild an identical world (see get_state/from_state).
+        object.__setattr__(self, "_init_kwargs", dict(
+            dt=dt, box=(tuple(map(float, box[0])), tuple(map(float, box[1]))), contact=asdict(contact),
+            density=density, density_scale=density_scale, gravity=tuple(map(float, gravity)), skin=skin,
+            threads=threads, max_overlap_ratio=max_overlap_ratio, sample_interval=sample_interval))
         p = _core.WorldParams()
         p.dt = _finite("dt", dt)
         lo, hi = box
         p.box_lo = [_finite("box", v) for v in lo]
         p.box_hi = [_finite("box", v) for v in hi]
-        p.contact = (contact or ContactLaw()).to_core()
+        p.contact = contact.to_core()
         p.density = _finite("density", density)
         p.density_scale = _finite("density_scale", density_scale)
         p.gravity = [_finite("gravity", g) for g in gravity]
@@ -144,7 +150,7 @@ class World:
         p.threads = _int("threads", threads, 1, 1024)
         p.max_overlap_ratio = _finite("max_overlap_ratio", max_overlap_ratio)
         p.sample_interval = _int("sample_interval", sample_interval, 1, 10**12)
-        self._core = _core.World(p)
+        object.__setattr__(self, "_core", _core.World(p))
         self.box = (tuple(lo), tuple(hi))
 
     def __getattr__(self, name):
@@ -204,9 +210,37 @@ class World:
     def clone(self) -> "World":
         """Deep copy of the whole state (particles, walls, contact history, bonds)."""
         new = World.__new__(World)
-        new._core = self._core.clone()
+        object.__setattr__(new, "_core", self._core.clone())
+        object.__setattr__(new, "_init_kwargs", dict(self._init_kwargs))
         new.box = self.box
         return new
+
+    def get_state(self) -> dict:
+        """The whole state (particles with their last forces, every contact's history, walls,
+        bonds, broken bonds, the clock) plus the construction parameters, as a dict of numpy
+        arrays and plain values. `World.from_state` rebuilds a world that continues bit for bit
+        (at the same thread count)."""
+        state = self._core.get_state()
+        kw = dict(self._init_kwargs)
+        kw["threads"] = self._core.threads
+        kw["dt"] = self._core.dt
+        kw["gravity"] = tuple(self._core.gravity)
+        kw["contact"] = _contact_dict(self._core.contact_params)
+        state["params"] = kw
+        return state
+
+    @classmethod
+    def from_state(cls, state: dict, threads: Optional[int] = None) -> "World":
+        """A world rebuilt from `get_state()`; `threads` overrides the saved thread count."""
+        if not isinstance(state, dict) or "params" not in state:
+            raise ParameterError("state must be a dict from World.get_state() (missing 'params')")
+        kw = dict(state["params"])
+        kw["contact"] = ContactLaw(**kw["contact"])
+        if threads is not None:
+            kw["threads"] = threads
+        w = cls(**kw)
+        w._core.set_state(state)
+        return w
 
     def __setattr__(self, name, value):
         # Settable engine properties (dt, threads, gravity) go to C++; the rest stays here.
@@ -214,6 +248,10 @@ class World:
             setattr(self._core, name, value)
         else:
             object.__setattr__(self, name, value)
+
+
+def _contact_dict(c) -> dict:
+    return {f.name: getattr(c, f.name) for f in fields(ContactLaw)}
 
 
 def _finite(name: str, value) -> float:

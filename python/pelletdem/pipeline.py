@@ -35,6 +35,7 @@ def relaxed_pellet(preset="quick", sigma_z: float = 120e6, seed: int = 0, thread
     p = _preset(preset)
     if not isinstance(threads, int) or not 1 <= threads <= 1024:
         raise ParameterError(f"threads = {threads!r} is out of range: allowed 1 <= threads <= 1024")
+    stages.check_sigma_z(sigma_z)  # before the fill, not after it
     res = Result(params={"preset": asdict(p), "sigma_z": sigma_z, "threads": threads,
                          "n_particles": n_particles}, seed=seed, version=__version__)
     pellet, st = stages.fill(p, seed=seed, threads=threads, n_particles=n_particles, progress=progress)
@@ -65,6 +66,7 @@ def run_pellet(preset="quick", material: str = "oak", mc: float = 8, sigma_z_mpa
     """Fill to broken pellet for one variant (material, mc in %, sigma_z in MPa). The bond
     parameters default to the paper's Table 5 values for that variant. Returns the Result."""
     law = bond_law if bond_law is not None else bond_law_for(material, mc, sigma_z_mpa)
+    law.to_core()  # a bad bond law fails here, not after the relaxation
     t0 = time.perf_counter()
     pellet, res = relaxed_pellet(preset, sigma_z=sigma_z_mpa * 1e6, seed=seed, threads=threads,
                                  n_particles=n_particles, progress=progress)

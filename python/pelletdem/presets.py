@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field, replace
 
-from .engine import ContactLaw
+from .engine import ContactLaw, ParameterError
 
 
 @dataclass(frozen=True)
@@ -67,8 +67,9 @@ PRESETS = {
 
 
 def get_preset(name: str) -> Preset:
-    """The preset called `name` ('paper', 'quick' or 'tiny'); ValueError lists the allowed ones."""
+    """The preset called `name` ('paper', 'quick' or 'tiny'); ParameterError (a ValueError)
+    lists the allowed ones."""
     try:
         return PRESETS[name]
-    except KeyError:
-        raise ValueError(f"preset = {name!r} is unknown: allowed {sorted(PRESETS)}") from None
+    except (KeyError, TypeError):
+        raise ParameterError(f"preset = {name!r} is unknown: allowed {sorted(PRESETS)}") from None

@@ -121,21 +121,31 @@ class Result:
             if f.attrs.get("format") != FORMAT:
                 raise ResultFileError(f"{path}: not a pelletdem result (format attribute "
                                       f"{f.attrs.get('format')!r}, expected {FORMAT!r})")
-            res = cls(params=json.loads(f.attrs["params"]), seed=int(f.attrs["seed"]),
-                      version=str(f.attrs["version"]))
-            groups = f.get("stages", {})
-            for name in sorted(groups, key=lambda n: groups[n].attrs["order"]):
-                g = groups[name]
-                res.stages[name] = StageResult(
-                    name, series={k: g["series"][k][()] for k in g["series"]},
-                    scalars={k: float(v) for k, v in g["scalars"].attrs.items()},
-                    wall_time_s=float(g.attrs["wall_time_s"]), steps=int(g.attrs["steps"]))
-            snaps = f.get("snapshots", {})
-            for name in sorted(snaps, key=lambda n: snaps[n].attrs["order"]):
-                g = snaps[name]
-                d = {k: g[k][()] for k in g}
-                d.update({k: float(v) for k, v in g.attrs.items() if k != "order"})
-                res.snapshots[name] = d
+            try:
+                return cls._read(f)
+            except (OSError, KeyError, ValueError, TypeError) as e:
+                # HDF5 notices a cut-off end when opening, damage inside only when reading.
+                raise ResultFileError(f"{path}: damaged pelletdem result "
+                                      f"({type(e).__name__}: {e})") from None
+
+    @classmethod
+    def _read(cls, f) -> "Result":
+        """The Result in an open pelletdem HDF5 file (KeyError/OSError when it is damaged)."""
+        res = cls(params=json.loads(f.attrs["params"]), seed=int(f.attrs["seed"]),
+                  version=str(f.attrs["version"]))
+        groups = f.get("stages", {})
+        for name in sorted(groups, key=lambda n: groups[n].attrs["order"]):
+            g = groups[name]
+            res.stages[name] = StageResult(
+                name, series={k: g["series"][k][()] for k in g["series"]},
+                scalars={k: float(v) for k, v in g["scalars"].attrs.items()},
+                wall_time_s=float(g.attrs["wall_time_s"]), steps=int(g.attrs["steps"]))
+        snaps = f.get("snapshots", {})
+        for name in sorted(snaps, key=lambda n: snaps[n].attrs["order"]):
+            g = snaps[name]
+            d = {k: g[k][()] for k in g}
+            d.update({k: float(v) for k, v in g.attrs.items() if k != "order"})
+            res.snapshots[name] = d
         return res
 
 

@@ -9,6 +9,7 @@
 #include "pelletdem/contact_law.hpp"
 #include "pelletdem/neighbor.hpp"
 #include "pelletdem/particles.hpp"
+#include "pelletdem/state.hpp"
 #include "pelletdem/walls.hpp"
 
 namespace pelletdem {
@@ -140,6 +141,11 @@ class World {
   }
   // Positions/velocities set from outside invalidate the contact list and the forces.
   void invalidate() { list_valid_ = false; forces_valid_ = false; }
+
+  // Save and restore the whole state. load_state needs a world built with the same
+  // WorldParams; after it the next step is exactly the step the saved world would have taken.
+  WorldState save_state() const;
+  void load_state(const WorldState& s);
 
   // --- restart support --------------------------------------------------------------------------
   void set_time(double t, long step) { time_ = t; step_ = step; }

@@ -1,0 +1,161 @@
+#!/usr/bin/env python3
+"""Engine benchmark: a dense, settled bed of polydisperse spheres (the paper's radii) in the
+10 mm cylinder, contact model of eq. 5-11.
+
+Run:  python3 benchmarks/bench_engine.py            (10,000 and 40,000 particles)
+      python3 benchmarks/bench_engine.py --sizes 10000 --steps 1000 --no-liggghts
+
+For each size it builds the settled bed once (cached in benchmarks/.cache), then in the same
+run times `--steps` steps on 1 and 2 threads, measures peak memory per particle in a fresh
+process, times the same bed in LIGGGHTS (Debian package `liggghts`: granular Hooke model with
+friction, same N, radii, stiffness and time step; see liggghts_ref.py), and times the bed
+compacted by a piston to 120 MPa (the costliest state of a pellet's life, with a higher
+coordination number). The last lines are the figures: particle-steps per second, ratios
+against LIGGGHTS per core, the 1 -> 2 thread speed-up, and bytes per particle. Ratios are taken
+against references measured in the same run, since the machine is shared and noisy.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import subprocess
+import sys
+import time
+
+import numpy as np
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+CACHE = os.path.join(HERE, ".cache")
+
+
+def _preset(n):
+    from pelletdem.presets import Preset
+
+    return Preset(name=f"bench{n}", n_particles=n, mould_diameter=0.010)
+
+
+def settled_bed(n: int, seed: int = 1):
+    """(positions, radii) of a settled bed of n spheres in the 10 mm mould (cached)."""
+    os.makedirs(CACHE, exist_ok=True)
+    path = os.path.join(CACHE, f"bed_{n}_{seed}.npz")
+    if os.path.exists(path):
+        d = np.load(path)
+        return d["x"], d["r"]
+    from pelletdem import stages
+
+    pellet, res = stages.fill(_preset(n), seed=seed, threads=2, progress=False)
+    x, r = np.array(pellet.world.x), np.array(pellet.world.r)
+    np.savez(path, x=x, r=r)
+    print(f"# settled bed of {n}: {res.steps} steps, {res.wall_time_s:.1f} s, CN {res.scalars['coordination_number']:.2f}",
+          flush=True)
+    return x, r
+
+
+def _world(x, r, threads):
+    import pelletdem as pd
+
+    R = 0.005
+    top = float((x[:, 2] + r).max())
+    w = pd.World(dt=2e-6, box=((-R - 1e-3, -R - 1e-3, -1e-3), (R + 1e-3, R + 1e-3, top + 2e-3)),
+                 threads=threads, skin=2e-5, sample_interval=10**9)
+    w.add_particles(x, r)
+    w.add_plane("floor", (0, 0, 0), (0, 0, 1))
+    w.add_cylinder("mould", (0, 0, 0), R)
+    return w
+
+
+def time_steps(x, r, threads: int, steps: int) -> float:
+    """Particle-steps per second of `steps` steps on the bed, after 200 warm-up steps."""
+    w = _world(x, r, threads)
+    w.run(200)
+    t0 = time.perf_counter()
+    w.run(steps)
+    dt = time.perf_counter() - t0
+    return len(r) * steps / dt
+
+
+def compacted(x, r, sigma_z=120e6, threads=2):
+    """The bed compacted by a piston to sigma_z (Pa): (world, coordination number)."""
+    w = _world(x, r, threads)
+    top = float((x[:, 2] + r).max())
+    piston = w.add_plane("piston", (0, 0, top), (0, 0, -1))
+    w.set_wall_velocity(piston, (0, 0, -0.1))
+    w.set_max_overlap_ratio(1.5)
+    w.run_until(max_steps=int(top / (0.1 * 2e-6)), wall_force_above=(piston, sigma_z * math.pi * 0.005**2))
+    w.set_wall_velocity(piston, (0, 0, 0))
+    return w
+
+
+def _memory_worker(n: int) -> None:
+    # Runs in a fresh process: RSS with the bed loaded and stepped, minus RSS before the world.
+    x, r = settled_bed(n)
+
+    def rss():
+        with open("/proc/self/statm") as fh:
+            return int(fh.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+
+    import pelletdem  # noqa: F401  (load the module before the baseline)
+
+    base = rss()
+    w = _world(x, r, 2)
+    w.run(500)
+    print(json.dumps({"bytes_per_particle": (rss() - base) / n, "pairs": w.pair_list_size}))
+
+
+def memory_per_particle(n: int) -> dict:
+    out = subprocess.run([sys.executable, __file__, "--memory-worker", str(n)], capture_output=True,
+                         text=True, check=True)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--sizes", type=int, nargs="+", default=[10000, 40000])
+    ap.add_argument("--steps", type=int, default=2000)
+    ap.add_argument("--no-liggghts", action="store_true")
+    ap.add_argument("--no-compacted", action="store_true")
+    ap.add_argument("--memory-worker", type=int, help=argparse.SUPPRESS)
+    a = ap.parse_args(argv)
+    if a.memory_worker:
+        _memory_worker(a.memory_worker)
+        return 0
+    rows = []
+    for n in a.sizes:
+        x, r = settled_bed(n)
+        row = {"n": n}
+        row["ps_1"] = time_steps(x, r, 1, a.steps)
+        row["ps_2"] = time_steps(x, r, 2, a.steps)
+        row.update(memory_per_particle(n))
+        if not a.no_liggghts:
+            sys.path.insert(0, HERE)
+            from liggghts_ref import liggghts_available, run_liggghts_bed
+
+            if liggghts_available():
+                lg = run_liggghts_bed(n, n_steps=a.steps, threads=1)
+                row["liggghts_ps_1"] = lg["particle_steps_per_s"]
+        if not a.no_compacted:
+            w = compacted(x, r)
+            row["compacted_cn"] = w.coordination_number()
+            for th in (1, 2):
+                w.threads = th
+                t0 = time.perf_counter()
+                w.run(a.steps // 2)
+                row[f"compacted_ps_{th}"] = n * (a.steps // 2) / (time.perf_counter() - t0)
+        rows.append(row)
+        print("# " + json.dumps(row), flush=True)
+    print()
+    print(f"{'N':>7} {'Mps/s 1T':>9} {'Mps/s 2T':>9} {'2T/1T':>6} {'LIGGGHTS 1T':>11} {'ours/LIGGGHTS':>13} "
+          f"{'B/particle':>10} {'compacted CN':>12} {'comp 1T':>8} {'comp 2T':>8}")
+    for row in rows:
+        lg = row.get("liggghts_ps_1", float("nan"))
+        print(f"{row['n']:>7} {row['ps_1']/1e6:>9.2f} {row['ps_2']/1e6:>9.2f} {row['ps_2']/row['ps_1']:>6.2f} "
+              f"{lg/1e6:>11.2f} {row['ps_1']/lg:>13.2f} {row['bytes_per_particle']:>10.0f} "
+              f"{row.get('compacted_cn', float('nan')):>12.2f} {row.get('compacted_ps_1', float('nan'))/1e6:>8.2f} "
+              f"{row.get('compacted_ps_2', float('nan'))/1e6:>8.2f}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
