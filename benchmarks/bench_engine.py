@@ -133,7 +133,8 @@ def main(argv=None) -> int:
             from liggghts_ref import liggghts_available, run_liggghts_bed
 
             if liggghts_available():
-                lg = run_liggghts_bed(n, n_steps=a.steps, threads=1)
+                # The identical bed, skin and warm-up, so both codes time the same contacts.
+                lg = run_liggghts_bed(n, n_steps=a.steps, threads=1, bed=(x, r), skin=2e-5, n_relax=200)
                 row["liggghts_ps_1"] = lg["particle_steps_per_s"]
         if not a.no_compacted:
             w = compacted(x, r)
