@@ -372,6 +372,7 @@ PYBIND11_MODULE(_core, m) {
       .value("Time", StopKind::Time)
       .value("Steps", StopKind::Steps)
       .value("KineticEnergyBelow", StopKind::KineticEnergyBelow)
+      .value("InternalKineticEnergyBelow", StopKind::InternalKineticEnergyBelow)
       .value("WallForceAbove", StopKind::WallForceAbove)
       .value("WallForceBelow", StopKind::WallForceBelow)
       .value("WallTravelAbove", StopKind::WallTravelAbove)
@@ -487,6 +488,10 @@ PYBIND11_MODULE(_core, m) {
       .def_property_readonly("n", [](const World& w) { return w.particles().size(); })
       .def("kinetic_energy", [](const World& w) { return w.kinetic_energy(); })
       .def("potential_energy", [](const World& w) { return w.potential_energy(); })
+      .def("internal_kinetic_energy", &World::internal_kinetic_energy,
+           "Kinetic energy in the centre-of-mass frame, J (scaled mass).")
+      .def("mean_velocity", [](const World& w) { Vec3 v = w.mean_velocity(); return std::vector<double>{v.x(), v.y(), v.z()}; })
+      .def("remove_mean_velocity", [](World& w) { w.remove_mean_velocity(); })
       .def("coordination_number", &World::coordination_number)
       .def_property_readonly("contact_count", &World::contact_count)
       .def_property_readonly("max_overlap_ratio_seen", &World::max_overlap_ratio_seen)

@@ -348,6 +348,7 @@ RunOutcome World::run_until(const std::vector<StopCondition>& conds, long max_st
         case StopKind::Time: hit = time_ >= c.value; break;
         case StopKind::Steps: hit = out.steps >= c.value; break;
         case StopKind::KineticEnergyBelow: hit = kinetic_energy() < c.value; break;
+        case StopKind::InternalKineticEnergyBelow: hit = internal_kinetic_energy() < c.value; break;
         case StopKind::WallForceAbove: hit = walls_[c.wall].normal_force() >= c.value; break;
         case StopKind::WallForceBelow: hit = walls_[c.wall].normal_force() <= c.value; break;
         case StopKind::WallTravelAbove: hit = walls_[c.wall].travel >= c.value; break;
@@ -384,6 +385,33 @@ double World::kinetic_energy() const {
   double e = 0.0;
   for (double x : part) e += x;  // fixed order: reproducible for a given thread count
   return e;
+}
+
+Vec3 World::mean_velocity() const {
+  Vec3 mom = Vec3::Zero();
+  double mass = 0.0;
+  for (std::size_t i = 0; i < p_.size(); ++i) {
+    mom += p_.m[i] * p_.v[i];
+    mass += p_.m[i];
+  }
+  return mass > 0.0 ? Vec3(mom / mass) : Vec3::Zero();
+}
+
+double World::internal_kinetic_energy() const {
+  // E - |P|^2 / (2 M): the translation of the whole assembly removed.
+  Vec3 mom = Vec3::Zero();
+  double mass = 0.0;
+  for (std::size_t i = 0; i < p_.size(); ++i) {
+    mom += p_.m[i] * p_.v[i];
+    mass += p_.m[i];
+  }
+  const double e = kinetic_energy() - (mass > 0.0 ? 0.5 * mom.squaredNorm() / mass : 0.0);
+  return std::max(e, 0.0);
+}
+
+void World::remove_mean_velocity() {
+  const Vec3 vm = mean_velocity();
+  for (auto& v : p_.v) v -= vm;
 }
 
 double World::potential_energy() const {

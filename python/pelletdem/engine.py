@@ -110,6 +110,7 @@ _CONDITIONS = {
     "time": StopKind.Time,
     "steps": StopKind.Steps,
     "kinetic_energy_below": StopKind.KineticEnergyBelow,
+    "internal_kinetic_energy_below": StopKind.InternalKineticEnergyBelow,
     "wall_force_above": StopKind.WallForceAbove,
     "wall_force_below": StopKind.WallForceBelow,
     "wall_travel_above": StopKind.WallTravelAbove,
@@ -169,6 +170,7 @@ class World:
         """Run until the first condition holds or `max_steps` steps have run.
 
         Conditions (keyword=value): time (s), steps, kinetic_energy_below (J, scaled mass),
+        internal_kinetic_energy_below (J, about the centre of mass),
         wall_force_above=(wall, N), wall_force_below=(wall, N) (compressive normal force),
         wall_travel_above=(wall, m), load_marker_above (m). kinetic_energy_below is tested
         every `check_interval` steps (it costs one pass over the particles).
@@ -183,7 +185,7 @@ class World:
                 if not (isinstance(value, (tuple, list)) and len(value) == 2):
                     raise ParameterError(f"{name} must be (wall index, value)")
                 wall, value = int(value[0]), value[1]
-            interval = check_interval if name == "kinetic_energy_below" else 1
+            interval = check_interval if name.endswith("kinetic_energy_below") else 1
             conds.append(_core.StopCondition(_CONDITIONS[name], _finite(name, value), wall,
                                              _int("check_interval", interval, 1, 10**9)))
             names.append(name)

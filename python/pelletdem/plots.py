@@ -158,3 +158,74 @@ def save_all(result, directory: str, variant=None) -> list:
                              "height": d.scalars["height"]}, path)
             out.append(path)
     return out
+
+
+# --- calibration (pelletdem.calibrate) -----------------------------------------------------
+
+def calibration_measured_vs_simulated(report, ax=None):
+    """Measured (Table 3, mean +- SD bars) against simulated values for the variants of a
+    calibration: (a) tensile strength sigma_f (MPa), (b) deformation at failure dL_f/D (-),
+    with the 1:1 line. `report` is a calibrate.CalibrationReport or its `table` (columns
+    sigma_f_mpa_exp/_sd/_sim, dLf_D_exp/_sd/_sim, material, mc_percent, sigma_z_mpa)."""
+    plt = _plt()
+    table = getattr(report, "table", report)
+    fig, (a, b) = plt.subplots(1, 2, figsize=(10, 4.5)) if ax is None else (ax[0].figure, ax)
+    markers = {"birch": "o", "oak": "s", "pine": "^"}
+    for panel, col, label in ((a, "sigma_f_mpa", "$\\sigma_f$ (MPa)"), (b, "dLf_D", "$\\Delta L_f/D$")):
+        exp, sd, sim = (np.asarray(table[f"{col}_{k}"], float) for k in ("exp", "sd", "sim"))
+        for i, row in enumerate(table.itertuples()):
+            m = markers.get(getattr(row, "material", ""), "o")
+            filled = getattr(row, "mc_percent", 8) == 8
+            panel.errorbar([exp[i]], [sim[i]], xerr=[sd[i]], fmt=m, capsize=3,
+                           mfc=None if filled else "none", color=f"C{i % 10}",
+                           label=f"{row.material} {row.mc_percent}% {row.sigma_z_mpa} MPa")
+        finite = np.concatenate([exp[np.isfinite(exp)], sim[np.isfinite(sim)]])
+        if finite.size:
+            lo, hi = 0.0, 1.1 * float(finite.max())
+            panel.plot([lo, hi], [lo, hi], "k--", lw=0.8)
+            panel.set_xlim(lo, hi)
+            panel.set_ylim(lo, hi)
+        panel.set_xlabel(f"measured {label} (Table 3, mean $\\pm$ SD)")
+        panel.set_ylabel(f"simulated {label}")
+    a.set_title("(a) tensile strength")
+    b.set_title("(b) deformation at failure")
+    b.legend(fontsize=6, ncol=2, loc="lower right")
+    fig.tight_layout()
+    return fig
+
+
+def calibration_parameter_map(points, x: str = "E_b", y: str = "sigma_c", value: str = "loss",
+                              ax=None, log: bool = True, best: bool = True):
+    """Fig. 14-style map of a fit error over two parameters: `points` is a scan's `points`
+    table (or a fit's `history`), x and y parameter columns (Pa, shown in MPa), `value` the
+    error column (rms z-score or RRMSE, -). A full grid is drawn as coloured cells, scattered
+    points (a fit's path) as coloured dots joined in run order; the lowest error is marked."""
+    plt = _plt()
+    fig, ax = (plt.subplots(figsize=(5.5, 4.5)) if ax is None else (ax.figure, ax))
+    xs = np.asarray(points[x], float) / 1e6
+    ys = np.asarray(points[y], float) / 1e6
+    vs = np.asarray(points[value], float)
+    vplot = np.where(np.isfinite(vs), vs, np.nan)
+    ux, uy = np.unique(xs), np.unique(ys)
+    if len(ux) * len(uy) == len(xs) and len(ux) > 1 and len(uy) > 1:
+        grid = np.full((len(uy), len(ux)), np.nan)
+        for xi, yi, vi in zip(xs, ys, vplot):
+            grid[np.searchsorted(uy, yi), np.searchsorted(ux, xi)] = vi
+        im = ax.pcolormesh(ux, uy, grid, shading="nearest", cmap="viridis_r")
+    else:
+        ax.plot(xs, ys, "-", color="0.6", lw=0.8, zorder=1)
+        im = ax.scatter(xs, ys, c=vplot, cmap="viridis_r", zorder=2)
+        for k, (xi, yi) in enumerate(zip(xs, ys)):
+            ax.annotate(str(k), (xi, yi), fontsize=7, xytext=(3, 3), textcoords="offset points")
+    fig.colorbar(im, ax=ax, label=value)
+    if best and np.isfinite(vplot).any():
+        k = int(np.nanargmin(vplot))
+        ax.plot([xs[k]], [ys[k]], "r*", ms=14, label=f"best: {value} = {vs[k]:.3g}")
+        ax.legend(fontsize=8)
+    if log:
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+    ax.set_xlabel(f"{x} (MPa)")
+    ax.set_ylabel(f"{y} (MPa)")
+    fig.tight_layout()
+    return fig

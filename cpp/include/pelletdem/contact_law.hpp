@@ -97,13 +97,13 @@ class HystereticLaw {
   const ContactLawParams& params() const { return p_; }
 
   // Factor on k1, k2, kc for one contact. Against a wall r_eff is the particle radius.
-  double stiffness_scale(double r_eff, bool wall) const {
+  PELLETDEM_INLINE double stiffness_scale(double r_eff, bool wall) const {
     if (wall) return p_.wall_stiffness_factor * (p_.scale_with_radius ? r_eff / p_.r_ref : 1.0);
     return p_.scale_with_radius ? 2.0 * r_eff / p_.r_ref : 1.0;
   }
 
   // Loading branch force at overlap delta (eq. 5 first line, with optional hardening).
-  double loading_force(double delta, double k1, double r_eff) const {
+  PELLETDEM_INLINE double loading_force(double delta, double k1, double r_eff) const {
     if (p_.hardening > 0.0)
       return k1 * delta * (1.0 + p_.hardening * std::pow(delta / r_eff, p_.hardening_exponent));
     return k1 * delta;
@@ -111,7 +111,7 @@ class HystereticLaw {
 
   // Normal force of eq. 5; updates the residual overlap delta0 so the unloading line moves
   // with the history (Walton-Braun with Luding's adhesive branch).
-  double normal_force(double delta, double& delta0, double r_eff, double adhesion_scale,
+  PELLETDEM_INLINE double normal_force(double delta, double& delta0, double r_eff, double adhesion_scale,
                       bool wall = false) const {
     const double s = stiffness_scale(r_eff, wall);
     const double k1 = s * p_.k1, k2 = s * p_.k2, kc = s * p_.kc * adhesion_scale;
@@ -128,7 +128,7 @@ class HystereticLaw {
     return f_elastic;
   }
 
-  ContactForce evaluate(const ContactKinematics& c, ContactHistory& h, double dt, double mu,
+  PELLETDEM_INLINE ContactForce evaluate(const ContactKinematics& c, ContactHistory& h, double dt, double mu,
                         double adhesion_scale) const {
     const double s = stiffness_scale(c.r_eff, c.wall);
     double fn = normal_force(c.delta, h.delta0, c.r_eff, adhesion_scale, c.wall);

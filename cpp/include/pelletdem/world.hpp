@@ -32,6 +32,7 @@ enum class StopKind {
   Time,                  // time >= value, s
   Steps,                 // steps run in this call >= value
   KineticEnergyBelow,    // kinetic energy < value, J (scaled mass)
+  InternalKineticEnergyBelow,  // kinetic energy about the centre of mass < value, J
   WallForceAbove,        // wall's compressive normal force >= value, N
   WallForceBelow,        // wall's compressive normal force <= value, N
   WallTravelAbove,       // wall's travel along its normal >= value, m
@@ -105,6 +106,10 @@ class World {
   double time() const { return time_; }
   long step_count() const { return step_; }
   double kinetic_energy() const;
+  // Kinetic energy in the centre-of-mass frame (a pellet drifting as a whole has none), J.
+  double internal_kinetic_energy() const;
+  Vec3 mean_velocity() const;  // mass-weighted, m/s
+  void remove_mean_velocity();
   double potential_energy() const;  // contacts, bonds and (scaled) gravity, J
   double coordination_number() const;
   long contact_count() const { return n_contacts_; }

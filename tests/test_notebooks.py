@@ -1,0 +1,67 @@
+"""Every notebook in notebooks/ runs from top to bottom at its small default size.
+
+Executed with nbclient in a fresh kernel, in a temporary directory (the notebooks write their
+results under PELLETDEM_NOTEBOOK_OUT when it is set); any error in any cell fails the test.
+The notebooks are kept with their outputs stripped. nbclient, nbformat and ipykernel are in
+the `test` extra of pyproject.toml.
+"""
+from __future__ import annotations
+
+import re
+import time
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+NOTEBOOKS = sorted((ROOT / "notebooks").glob("*.ipynb"))
+
+
+def test_there_are_notebooks():
+    assert any(p.name == "01_pellet_life.ipynb" for p in NOTEBOOKS)
+
+
+@pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.name)
+def test_notebook_is_stored_without_outputs(path):
+    nbformat = pytest.importorskip("nbformat")
+    nb = nbformat.read(path, as_version=4)
+    nbformat.validate(nb)
+    for cell in nb.cells:
+        if cell.cell_type == "code":
+            assert cell.outputs == [], f"{path.name}: a cell has stored outputs"
+            assert cell.execution_count is None, f"{path.name}: a cell has an execution count"
+
+
+@pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.name)
+def test_notebook_defaults_to_the_small_size(path):
+    """The size knob sits at the top and defaults to the small preset."""
+    nbformat = pytest.importorskip("nbformat")
+    nb = nbformat.read(path, as_version=4)
+    code = [c.source for c in nb.cells if c.cell_type == "code"]
+    knobs = [m for src in code[:2] for m in re.findall(r'^PRESET\s*=\s*"(\w+)"', src, re.M)]
+    if knobs:
+        assert knobs == ["tiny"], knobs
+
+
+@pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.name)
+def test_notebook_runs(path, tmp_path, monkeypatch):
+    nbformat = pytest.importorskip("nbformat")
+    nbclient = pytest.importorskip("nbclient")
+    pytest.importorskip("ipykernel")
+    nb = nbformat.read(path, as_version=4)
+    monkeypatch.setenv("PELLETDEM_NOTEBOOK_OUT", str(tmp_path / "out"))
+    monkeypatch.setenv("OMP_WAIT_POLICY", "PASSIVE")
+    client = nbclient.NotebookClient(nb, timeout=900, kernel_name="python3",
+                                     resources={"metadata": {"path": str(tmp_path)}})
+    t0 = time.perf_counter()
+    client.execute()  # raises CellExecutionError on the first failing cell
+    print(f"{path.name}: {time.perf_counter() - t0:.0f} s")
+    errors = [o for c in nb.cells if c.cell_type == "code" for o in c.outputs if o.output_type == "error"]
+    assert not errors
+    if path.name == "01_pellet_life.ipynb":
+        out = tmp_path / "out"
+        assert (out / "result.h5").is_file() and (out / "result.xdmf").is_file()
+        assert (out / "fig16_crack_map.png").is_file()
+        images = sum("image/png" in o.get("data", {}) for c in nb.cells if c.cell_type == "code"
+                     for o in c.outputs)
+        assert images >= 10  # every stage drew its plots
