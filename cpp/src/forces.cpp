@@ -120,7 +120,7 @@ double World::adhesion_scale() const {
   return std::max(0.0, 1.0 - (time_ - ramp_start_) / ramp_duration_);
 }
 
-void World::compute_forces() {
+void World::compute_forces(bool advance) {
   const long n = static_cast<long>(p_.size());
   const int nt = team();
   if (static_cast<int>(buf_f_.size()) != nt - 1) {
@@ -132,6 +132,10 @@ void World::compute_forces() {
     buf_t_[k].resize(n);
   }
   const double dt = params_.dt;
+  // Incremental springs advance by v dt only when the particles moved since the last force
+  // evaluation; a recomputation in place (after set_velocities, a new wall, a restored state)
+  // must not stretch them again.
+  const double dt_inc = advance ? dt : 0.0;
   const double adh = adhesion_scale();
   const ContactLawParams& cp = law_.params();
   const Vec3 g = params_.gravity / params_.density_scale;
@@ -180,7 +184,7 @@ void World::compute_forces() {
         const double vn = v_rel.dot(nv);
         ContactKinematics c{delta, vn, v_rel - vn * nv, nv, ri * p_.r[j] / rsum,
                             p_.m[i] * p_.m[j] / (p_.m[i] + p_.m[j])};
-        const ContactForce cf = law_.evaluate(c, h, dt, cp.mu, adh);
+        const ContactForce cf = law_.evaluate(c, h, dt_inc, cp.mu, adh);
         const Vec3 fj = cf.fn * nv + cf.ft;
         F[j] += fj;
         F[i] -= fj;
@@ -252,12 +256,13 @@ void World::compute_forces() {
     bond.mn = 0.0;
     bond.mt.setZero();
   }
-  wall_forces();
+  wall_forces(advance);
   max_overlap_seen_ = std::max(max_overlap_seen_, max_overlap_);
 }
 
-void World::wall_forces() {
+void World::wall_forces(bool advance) {
   const double dt = params_.dt;
+  const double dt_inc = advance ? dt : 0.0;
   const ContactLawParams& cp = law_.params();
   const double adh = cp.wall_adhesion ? adhesion_scale() : 0.0;
   const int nt = team();
@@ -293,7 +298,7 @@ void World::wall_forces() {
         const Vec3 v_rel = p_.v[i] - a * p_.w[i].cross(n_into) - w.surface_velocity(n_into);
         const double vn = v_rel.dot(n_into);
         ContactKinematics c{delta, vn, v_rel - vn * n_into, n_into, p_.r[i], p_.m[i], true};
-        const ContactForce cf = law_.evaluate(c, wc.h, dt, cp.mu_wall, adh);
+        const ContactForce cf = law_.evaluate(c, wc.h, dt_inc, cp.mu_wall, adh);
         const Vec3 fp = cf.fn * n_into + cf.ft;
         p_.f[i] += fp;
         p_.t[i] += -a * n_into.cross(cf.ft) +

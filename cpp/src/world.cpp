@@ -223,7 +223,7 @@ void World::rebuild() {
 void World::ensure_forces() {
   if (!list_valid_) rebuild();
   if (!forces_valid_) {
-    compute_forces();
+    compute_forces(false);
     forces_valid_ = true;
   }
 }

@@ -217,6 +217,12 @@ class World:
         new.box = self.box
         return new
 
+    def create_bonds(self, law) -> int:
+        """Bond every touching pair (and pairs within law.gap_tolerance), stress-free now.
+        `law` is a BondLaw (or the engine's BondParams). Returns the number of bonds."""
+        core = law.to_core() if isinstance(law, BondLaw) else law
+        return self._core.create_bonds(core)
+
     def get_state(self) -> dict:
         """The whole state (particles with their last forces, every contact's history, walls,
         bonds, broken bonds, the clock) plus the construction parameters, as a dict of numpy

@@ -158,8 +158,8 @@ class World {
 
  private:
   void ensure_forces();
-  void compute_forces();
-  void wall_forces();
+  void compute_forces(bool advance = true);
+  void wall_forces(bool advance = true);
   void move_walls();
   void rebuild();
   void build_wall_lists();

@@ -1,0 +1,166 @@
+#!/usr/bin/env python3
+"""What parallel bonds cost per step: a bonded bed against the same bed unbonded.
+
+Usage (one command; ~5 minutes for 8000 particles on 2 cores, most of it building the bed):
+
+    python benchmarks/bench_bonds.py                 # 8000 particles, 1 and 2 threads
+    python benchmarks/bench_bonds.py --n 5000 --threads 1,2,4 --steps 3000
+
+The bed: `--n` polydisperse spheres (Table 4 radii: 0.2 mm mean) placed at random in the
+paper's 10 mm mould (a z-aligned cylinder with a floor), then compacted by a piston plane
+coming down at `--piston-speed` (0.2 m/s) until the coordination number (overlapping pairs per
+particle) reaches `--cn` (12 by default, the paper's 10.5-12.9) or the piston stress reaches
+`--max-stress` (150 MPa), and held there. With the linear contact law a polydisperse bed
+reaches CN ~ 9-10 near 150-200 MPa and the small particles' overlaps hit the engine's guard
+(delta/r = 1.5) before CN 12; so every contact is bonded and, when the contacts fall short,
+the nearest non-touching pairs too (gap_tolerance chosen so that the bond coordination number
+2 n_bonds / N is `--cn`): the cost measured is that of CN/2 bonds per particle. Bond
+parameters are the paper's (r_b = 20 um, E_b = 120 MPa, sigma_c = tau_c = 36 MPa). A clone
+of the same state stays unbonded. Both are stepped `--steps` steps at each thread count, the two
+alternating `--repeats` times (the best time of each is kept, so other load on the machine
+costs as little as possible); the measure is particle-steps per second. The last lines
+printed give, per thread count, the bonded/unbonded time per step (the bonds' extra cost;
+the target is < 1.5).
+
+Small systems run on one thread whatever is asked (World.kParallelMin = 2048 particles), so
+use --n above that for the thread comparison.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import platform
+import sys
+import time
+
+import numpy as np
+
+import pelletdem as pd
+
+
+def build_bed(n: int, cn_target: float, piston_speed: float, max_stress: float, seed: int,
+              threads: int, verbose: bool = True):
+    """Random fill of the 10 mm mould and piston compaction to coordination number cn_target,
+    or to the piston stress max_stress (Pa) if that comes first.
+
+    Returns (world, info dict). The piston stops and stays; gravity is off.
+    """
+    t0 = time.perf_counter()
+    r_mould = 5e-3
+    area = math.pi * r_mould**2
+    radii = pd.truncated_normal_radii(n, seed=seed)
+    solid = float(np.sum(4.0 / 3.0 * math.pi * radii**3))
+    h_fill = solid / (0.28 * area)
+    x, radii = pd.random_pack_cylinder(radii, radius=r_mould - 1e-9, z_lo=0.0, z_hi=h_fill, seed=seed + 1)
+    box = ((-1.5 * r_mould, -1.5 * r_mould, -1e-3), (1.5 * r_mould, 1.5 * r_mould, h_fill + 2e-3))
+    w = pd.World(dt=2e-6, box=box, gravity=(0.0, 0.0, 0.0), threads=threads, skin=2e-5,
+                 max_overlap_ratio=1.5)
+    w.add_particles(x, radii)
+    w.add_plane("floor", (0, 0, 0), (0, 0, 1))
+    w.add_cylinder("mould", (0, 0, 0), r_mould)
+    piston = w.add_plane("piston", (0, 0, h_fill + 1e-4), (0, 0, -1))
+    w.set_wall_velocity(piston, (0, 0, -piston_speed))
+    chunk = 500
+    cn = w.coordination_number()
+    sigma = 0.0
+    while cn < cn_target and sigma < max_stress:
+        w.run(chunk)
+        cn = w.coordination_number()
+        sigma = w.wall_state(piston)["normal_force"] / area
+        if verbose and w.step_count % 5000 == 0:
+            print(f"  compacting: t = {w.time * 1e3:6.1f} ms  piston at "
+                  f"{w.wall_state(piston)['point'][2] * 1e3:6.3f} mm  CN = {cn:5.2f}  "
+                  f"sigma_z = {sigma / 1e6:6.1f} MPa", flush=True)
+    w.set_wall_velocity(piston, (0, 0, 0))
+    w.run(1000)  # let the bed settle under the held piston
+    info = {"n": w.n, "cn": w.coordination_number(), "contacts": w.contact_count,
+            "sigma_z_MPa": w.wall_state(piston)["normal_force"] / area / 1e6,
+            "height_mm": w.wall_state(piston)["point"][2] * 1e3,
+            "build_s": time.perf_counter() - t0}
+    return w, info
+
+
+def gap_for_bond_cn(w, cn_target: float, skin: float) -> float:
+    """Surface gap (m, <= skin) within which bonding pairs gives cn_target bonds per particle
+    (0 when the contacts alone reach it)."""
+    i, j = pd._core.neighbor_pairs(w._core)
+    x, r = w.positions(), w.radii()
+    gap = np.linalg.norm(x[j] - x[i], axis=1) - r[i] - r[j]
+    want = int(round(0.5 * cn_target * w.n))
+    gap = np.sort(gap)
+    if np.count_nonzero(gap < 0) >= want:
+        return 0.0
+    if want >= len(gap):
+        return skin
+    return float(min(skin, max(0.0, 0.5 * (gap[want - 1] + gap[want]))))
+
+
+def time_steps(w, steps: int) -> float:
+    t = time.perf_counter()
+    w.run(steps)
+    return time.perf_counter() - t
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--n", type=int, default=8000, help="particles (default 8000)")
+    ap.add_argument("--cn", type=float, default=12.0, help="coordination number to compact to")
+    ap.add_argument("--steps", type=int, default=2000, help="timed steps per run")
+    ap.add_argument("--repeats", type=int, default=3, help="alternating timed runs per case (best kept)")
+    ap.add_argument("--threads", default="1,2", help="comma-separated thread counts")
+    ap.add_argument("--piston-speed", type=float, default=0.2, help="m/s")
+    ap.add_argument("--max-stress", type=float, default=150e6,
+                    help="piston stress at which compaction stops if CN is not reached, Pa")
+    ap.add_argument("--seed", type=int, default=0)
+    a = ap.parse_args(argv)
+    threads = [int(t) for t in a.threads.split(",")]
+
+    print(f"pelletdem {pd.__version__}, python {platform.python_version()}, "
+          f"{os.cpu_count()} CPUs, {platform.processor() or platform.machine()}")
+    print(f"building the bed: {a.n} particles, 10 mm mould, piston to CN = {a.cn}", flush=True)
+    bed, info = build_bed(a.n, a.cn, a.piston_speed, a.max_stress, a.seed, max(threads))
+    print(f"bed: N = {info['n']}, CN = {info['cn']:.2f} ({info['contacts']} contacts), "
+          f"sigma_z = {info['sigma_z_MPa']:.1f} MPa, height {info['height_mm']:.2f} mm, "
+          f"built in {info['build_s']:.0f} s")
+
+    plain = bed.clone()
+    bonded = bed.clone()
+    gap = gap_for_bond_cn(bonded, a.cn, 2e-5)
+    n_bonds = bonded.create_bonds(pd.BondLaw(gap_tolerance=gap).to_core())
+    print(f"bonds: {n_bonds} on pairs closer than {gap * 1e6:.2f} um "
+          f"(bond coordination number {2 * n_bonds / bonded.n:.2f})")
+
+    results = {}
+    for nt in threads:
+        plain.threads = nt
+        bonded.threads = nt
+        # Warm up: first steps after a clone rebuild the lists and touch all memory.
+        time_steps(plain, 100)
+        time_steps(bonded, 100)
+        tp, tb = [], []
+        for _ in range(a.repeats):
+            tp.append(time_steps(plain, a.steps))
+            tb.append(time_steps(bonded, a.steps))
+        results[nt] = (min(tp), min(tb))
+        ps = bed.n * a.steps
+        print(f"threads {nt}: unbonded {ps / min(tp):.3e} particle-steps/s, "
+              f"bonded {ps / min(tb):.3e} particle-steps/s "
+              f"(runs: {', '.join(f'{t:.2f}' for t in tp)} s | {', '.join(f'{t:.2f}' for t in tb)} s)",
+              flush=True)
+    print(f"bonds intact after timing: {bonded.intact_bond_count()} of {n_bonds}")
+    if len(threads) > 1:
+        t1 = threads[0]
+        for nt in threads[1:]:
+            print(f"speed-up {t1} -> {nt} threads: unbonded x{results[t1][0] / results[nt][0]:.2f}, "
+                  f"bonded x{results[t1][1] / results[nt][1]:.2f}")
+    for nt in threads:
+        ratio = results[nt][1] / results[nt][0]
+        print(f"bonded/unbonded time per step, {nt} thread{'s' if nt > 1 else ''}: {ratio:.3f} "
+              f"({(ratio - 1) * 100:+.1f}% for bonds; target < +50%: "
+              f"{'met' if ratio < 1.5 else 'NOT met'})")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
