@@ -116,6 +116,8 @@ def main(argv=None) -> int:
     ap.add_argument("--steps", type=int, default=2000)
     ap.add_argument("--no-liggghts", action="store_true")
     ap.add_argument("--no-compacted", action="store_true")
+    ap.add_argument("--compacted-sizes", type=int, nargs="+", default=[10000],
+                    help="sizes whose compacted state is timed too (compaction is the slow part)")
     ap.add_argument("--memory-worker", type=int, help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
     if a.memory_worker:
@@ -136,7 +138,7 @@ def main(argv=None) -> int:
                 # The identical bed, skin and warm-up, so both codes time the same contacts.
                 lg = run_liggghts_bed(n, n_steps=a.steps, threads=1, bed=(x, r), skin=2e-5, n_relax=200)
                 row["liggghts_ps_1"] = lg["particle_steps_per_s"]
-        if not a.no_compacted:
+        if not a.no_compacted and n in a.compacted_sizes:
             w = compacted(x, r)
             row["compacted_cn"] = w.coordination_number()
             for th in (1, 2):

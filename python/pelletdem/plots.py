@@ -181,7 +181,8 @@ def calibration_measured_vs_simulated(report, ax=None):
                            label=f"{row.material} {row.mc_percent}% {row.sigma_z_mpa} MPa")
         finite = np.concatenate([exp[np.isfinite(exp)], sim[np.isfinite(sim)]])
         if finite.size:
-            lo, hi = 0.0, 1.1 * float(finite.max())
+            lo, hi = float(finite.min()), float(finite.max())
+            lo, hi = (0.0 if lo < 0.3 * hi else 0.8 * lo), 1.1 * hi
             panel.plot([lo, hi], [lo, hi], "k--", lw=0.8)
             panel.set_xlim(lo, hi)
             panel.set_ylim(lo, hi)
