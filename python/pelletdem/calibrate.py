@@ -60,7 +60,9 @@ Searching
       sigma_z / k1, so d ln BD / d ln k1 = -d ln BD / d ln sigma_z, read off the loading curve
       of the first run: no finite-difference run is needed for k1 (or p_y) either.
 
-    A diametral test that ends before sigma_1 has fallen 5% below its peak yields bounds of
+    The failure of a simulated pellet is the first peak of sigma_1(dL/D) after which the
+    (lightly smoothed) curve falls by 10% (:func:`failure_point`): a small pellet can break and
+    then load up again as the plates crush it. A test that ends before such a fall yields bounds of
     sigma_f and dL_f/D, not values (``peaked`` = 0): such a run is scored as if its peak came
     at 1.5 x the end of the test (:data:`CENSORED_DLF_FACTOR`), and its values count a thousand
     times less in the local model, whose slopes then stay at the scaling law's. Scans score
@@ -116,12 +118,13 @@ from .presets import Preset, get_preset
 __all__ = [
     "PARAMETERS", "SCALING_EXPONENTS", "CACHE_FORMAT", "RELAX_MEMO_SIZE",
     "RunSpec", "make_spec", "cache_key", "engine_fingerprint", "RunCache", "run_point", "clone_pellet",
+    "failure_point", "FAILURE_DROP",
     "Targets", "diametral_error", "curve_error", "density_error", "score",
     "compaction_targets", "ScanResult", "scan", "FitResult", "fit",
     "CalibrationReport", "calibrate_variants",
 ]
 
-CACHE_FORMAT = 1
+CACHE_FORMAT = 2  # 2: sigma_f / dLf_D at the first failure (failure_point)
 #: Relaxed pellets memoised per worker process (each holds a whole C++ world).
 RELAX_MEMO_SIZE = int(os.environ.get("PELLETDEM_RELAX_MEMO", "4"))
 
@@ -550,6 +553,44 @@ def clear_memo() -> None:
         _MEMO.clear()
 
 
+#: A failure is a peak of the smoothed sigma_1(dL/D) after which it falls by this fraction.
+FAILURE_DROP = 0.10
+
+
+def failure_point(dL_D, sigma_1, drop: float = FAILURE_DROP,
+                  min_fraction: float = 0.5) -> Tuple[float, float, bool]:
+    """The pellet's failure on a diametral curve: (sigma_f (Pa), dL_f/D (-), peaked).
+
+    The first peak of sigma_1 (Pa) against dL/D (-) of at least ``min_fraction`` of the
+    curve's maximum (which skips the spike of the plates' first contacts) after which the
+    curve, smoothed over ~2.5% of its points to ignore the jitter of single bond breaks,
+    falls by ``drop`` (10%) of the peak: sigma_f is the largest raw sigma_1 up to that fall
+    and dL_f/D where it is reached.
+    A small pellet can break and then load up again as the plates crush it, so the global
+    maximum (the stage's ``sigma_f``) can come after the failure. ``peaked`` is False when no
+    such fall happens before the test ends: the values returned (the global maximum) are then
+    lower bounds.
+    """
+    x, y = np.asarray(dL_D, float), np.asarray(sigma_1, float)
+    n = len(y)
+    if n == 0:
+        return float("nan"), float("nan"), False
+    w = max(1, n // 40)
+    box = np.ones(2 * w + 1)
+    ys = np.convolve(y, box, mode="same") / np.convolve(np.ones(n), box, mode="same")  # edges: mean of fewer
+    floor = min_fraction * float(ys.max())  # ignore the toe (first contacts of the plates)
+    m, end = -np.inf, None
+    for i, v in enumerate(ys):
+        if v > m:
+            m = v
+        elif m > 0 and m >= floor and v < (1.0 - drop) * m:
+            end = i
+            break
+    seg = slice(0, n if end is None else end + 1)
+    k = int(np.argmax(y[seg]))
+    return float(y[k]), float(x[k]), end is not None
+
+
 def run_point(spec: RunSpec, relaxed_dir: Optional[Union[str, os.PathLike]] = None) -> dict:
     """Run one :class:`RunSpec` (threads=1) and return its cache record (plain JSON values).
 
@@ -558,8 +599,9 @@ def run_point(spec: RunSpec, relaxed_dir: Optional[Union[str, os.PathLike]] = No
     and is computed (memoised, and saved to ``relaxed_dir``) otherwise. Record fields: ``key``, ``relax_key``, ``spec``
     (inputs), ``ok``, ``error`` (the engine's message when a run failed), ``outputs``
     (compaction: bulk densities kg/m^3, coordination numbers, dlnbd_dlnsigma; diametral:
-    ``sigma_f`` Pa, ``dLf_D``, ``peaked`` 1.0 when sigma_1 fell 5% below its peak before the
-    test ended, bond counts), ``curve`` ({dL_D, sigma_1 (Pa)}), ``compaction_curve``,
+    ``sigma_f`` Pa and ``dLf_D`` at the failure (:func:`failure_point`), ``peaked`` 1.0 when
+    the failure came before the test ended (0.0: the values are lower bounds),
+    ``sigma_f_max`` / ``dLf_D_max`` the curve's global maximum, bond counts), ``curve`` ({dL_D, sigma_1 (Pa)}), ``compaction_curve``,
     ``relaxed_reused`` (False when this run relaxed the pellet), ``relaxed_from`` ('memory',
     'disk' or ''), ``wall_time_s`` (s), ``worker``.
     """
@@ -582,10 +624,10 @@ def run_point(spec: RunSpec, relaxed_dir: Optional[Union[str, os.PathLike]] = No
             b, d = res.stages["bond"].scalars, res.stages["diametral"]
             sig1 = np.asarray(d.series["sigma_1"], float)
             dl = np.asarray(d.series["dL_D"], float)
-            k = int(np.argmax(sig1)) if len(sig1) else 0
-            peaked = bool(len(sig1) and sig1[k:].min() < 0.95 * sig1[k])
+            sf, dlf, peaked = failure_point(dl, sig1)
             rec["outputs"].update({
-                "sigma_f": d.scalars["sigma_f"], "dLf_D": d.scalars["dLf_D"], "peaked": float(peaked),
+                "sigma_f": sf, "dLf_D": dlf, "peaked": float(peaked),
+                "sigma_f_max": d.scalars["sigma_f"], "dLf_D_max": d.scalars["dLf_D"],
                 "bonds_per_particle": b["bonds_per_particle"], "n_bonds": b["n_bonds"],
                 "largest_cluster_fraction": b["largest_cluster_fraction"],
                 "broken_during_ramp": b["broken_during_ramp"], "bonds_broken": d.scalars["bonds_broken"],

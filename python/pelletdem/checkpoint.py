@@ -5,11 +5,11 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
 
 import numpy as np
 
 from .engine import World
+from .h5io import atomic_h5, open_h5
 
 FORMAT = "pelletdem-checkpoint-1"
 
@@ -20,56 +20,29 @@ class CheckpointError(ValueError):
 
 def save_world(world: World, path: str, extra: dict | None = None) -> str:
     """Write `world`'s state (and optional JSON-able `extra` metadata) to `path`; returns it."""
-    import h5py
-
     state = world.get_state()
-    path = os.fspath(path)
-    directory = os.path.dirname(os.path.abspath(path))
-    os.makedirs(directory, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=".h5", dir=directory)
-    os.close(fd)
-    try:
-        with h5py.File(tmp, "w") as f:
-            f.attrs["format"] = FORMAT
-            f.attrs["params"] = json.dumps(state.pop("params"))
-            f.attrs["extra"] = json.dumps(extra or {})
-            walls = state.pop("walls")
-            for k, v in state.items():
-                if isinstance(v, np.ndarray):
-                    f.create_dataset(k, data=v)
-                else:
-                    f.attrs[k] = v
-            for n, wd in enumerate(walls):
-                g = f.create_group(f"walls/{n:03d}")
-                for k, v in wd.items():
-                    if isinstance(v, np.ndarray):
-                        g.create_dataset(k, data=v)
-                    else:
-                        g.attrs[k] = v
-            f.flush()
-            os.fsync(f.id.get_vfd_handle())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.remove(tmp)
-        raise
+    with atomic_h5(path, FORMAT) as f:
+        f.attrs["params"] = json.dumps(state.pop("params"))
+        f.attrs["extra"] = json.dumps(extra or {})
+        walls = state.pop("walls")
+        _write_flat(f, state)
+        for n, wd in enumerate(walls):
+            _write_flat(f.create_group(f"walls/{n:03d}"), wd)
     return path
+
+
+def _write_flat(group, values: dict) -> None:
+    # Arrays become datasets, plain values attributes.
+    for k, v in values.items():
+        if isinstance(v, np.ndarray):
+            group.create_dataset(k, data=v)
+        else:
+            group.attrs[k] = v
 
 
 def read_state(path: str) -> tuple[dict, dict]:
     """(state dict for World.from_state, extra metadata) from a checkpoint file."""
-    import h5py
-
-    path = os.fspath(path)
-    if not os.path.exists(path):
-        raise CheckpointError(f"{path}: no such checkpoint")
-    try:
-        f = h5py.File(path, "r")
-    except OSError as e:
-        raise CheckpointError(f"{path}: not a readable HDF5 file (truncated or foreign): {e}") from None
-    with f:
-        if f.attrs.get("format") != FORMAT:
-            raise CheckpointError(f"{path}: not a pelletdem checkpoint (format {f.attrs.get('format')!r})")
+    with open_h5(path, FORMAT, CheckpointError, "pelletdem checkpoint") as f:
         state = {k: f[k][()] for k in f if k != "walls"}
         for k, v in f.attrs.items():
             if k not in ("format", "params", "extra"):

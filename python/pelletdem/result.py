@@ -6,12 +6,12 @@ from __future__ import annotations
 import json
 import math
 import os
-import tempfile
 from dataclasses import dataclass, field
 from typing import Dict, Optional
 
 import numpy as np
 
+from .h5io import atomic_h5, open_h5
 from .stages import StageResult
 
 FORMAT = "pelletdem-result-1"
@@ -63,43 +63,30 @@ class Result:
     def save(self, path: str, xdmf: bool = True) -> str:
         """Write to HDF5 at `path` (atomically: a temporary name, then a rename, so a kill
         leaves any previous file whole) and, if `xdmf`, an XDMF file beside it. Returns path."""
-        import h5py
-
         path = os.fspath(path)
-        directory = os.path.dirname(os.path.abspath(path))
-        os.makedirs(directory, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=".h5", dir=directory)
-        os.close(fd)
-        try:
-            with h5py.File(tmp, "w") as f:
-                f.attrs["format"] = FORMAT
-                f.attrs["version"] = self.version
-                f.attrs["seed"] = self.seed
-                f.attrs["params"] = json.dumps(self.params, default=_jsonable)
-                for name, st in self.stages.items():
-                    g = f.create_group(f"stages/{name}")
-                    g.attrs["wall_time_s"] = st.wall_time_s
-                    g.attrs["steps"] = st.steps
-                    g.attrs["order"] = list(self.stages).index(name)
-                    sc = g.create_group("scalars")
-                    for k, v in st.scalars.items():
-                        sc.attrs[k] = float(v)
-                    se = g.create_group("series")
-                    for k, v in st.series.items():
-                        se.create_dataset(k, data=np.asarray(v))
-                for name, snap in self.snapshots.items():
-                    g = f.create_group(f"snapshots/{name}")
-                    g.attrs["order"] = list(self.snapshots).index(name)
-                    for k, v in snap.items():
-                        if np.ndim(v) == 0:
-                            g.attrs[k] = float(v)
-                        else:
-                            g.create_dataset(k, data=np.asarray(v))
-            os.replace(tmp, path)
-        except BaseException:
-            if os.path.exists(tmp):
-                os.remove(tmp)
-            raise
+        with atomic_h5(path, FORMAT) as f:
+            f.attrs["version"] = self.version
+            f.attrs["seed"] = self.seed
+            f.attrs["params"] = json.dumps(self.params, default=_jsonable)
+            for name, st in self.stages.items():
+                g = f.create_group(f"stages/{name}")
+                g.attrs["wall_time_s"] = st.wall_time_s
+                g.attrs["steps"] = st.steps
+                g.attrs["order"] = list(self.stages).index(name)
+                sc = g.create_group("scalars")
+                for k, v in st.scalars.items():
+                    sc.attrs[k] = float(v)
+                se = g.create_group("series")
+                for k, v in st.series.items():
+                    se.create_dataset(k, data=np.asarray(v))
+            for name, snap in self.snapshots.items():
+                g = f.create_group(f"snapshots/{name}")
+                g.attrs["order"] = list(self.snapshots).index(name)
+                for k, v in snap.items():
+                    if np.ndim(v) == 0:
+                        g.attrs[k] = float(v)
+                    else:
+                        g.create_dataset(k, data=np.asarray(v))
         if xdmf:
             write_xdmf(self, path)
         return path
@@ -108,19 +95,7 @@ class Result:
     def load(cls, path: str) -> "Result":
         """Read a Result written by `save`. A missing, truncated or foreign file raises
         ResultFileError naming the file and what is wrong."""
-        import h5py
-
-        path = os.fspath(path)
-        if not os.path.exists(path):
-            raise ResultFileError(f"{path}: no such file")
-        try:
-            f = h5py.File(path, "r")
-        except OSError as e:
-            raise ResultFileError(f"{path}: not a readable HDF5 file (truncated or foreign): {e}") from None
-        with f:
-            if f.attrs.get("format") != FORMAT:
-                raise ResultFileError(f"{path}: not a pelletdem result (format attribute "
-                                      f"{f.attrs.get('format')!r}, expected {FORMAT!r})")
+        with open_h5(path, FORMAT, ResultFileError, "pelletdem result") as f:
             try:
                 return cls._read(f)
             except (OSError, KeyError, ValueError, TypeError) as e:
