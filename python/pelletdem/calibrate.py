@@ -124,7 +124,7 @@ __all__ = [
     "CalibrationReport", "calibrate_variants",
 ]
 
-CACHE_FORMAT = 2  # 2: sigma_f / dLf_D at the first failure (failure_point)
+CACHE_FORMAT = 3  # 2: sigma_f / dLf_D at the first failure; 3: after-relax fields honoured
 #: Relaxed pellets memoised per worker process (each holds a whole C++ world).
 RELAX_MEMO_SIZE = int(os.environ.get("PELLETDEM_RELAX_MEMO", "4"))
 
@@ -620,6 +620,9 @@ def run_point(spec: RunSpec, relaxed_dir: Optional[Union[str, os.PathLike]] = No
         if spec.bond is not None:
             with _key_lock(spec.relax_key):
                 branch = clone_pellet(pellet)
+            # the relaxed pellet may come from a spec that differs in the after-relax fields
+            # (plate speed, max_dLD, bond ramp): the stages read them from the pellet's preset
+            branch.preset = spec.preset
             res = pipeline.break_pellet(branch, spec.bond, progress=False)
             b, d = res.stages["bond"].scalars, res.stages["diametral"]
             sig1 = np.asarray(d.series["sigma_1"], float)
@@ -1260,7 +1263,7 @@ def scan(param_grid: Mapping[str, Sequence[float]], targets=None, *, preset="tin
             outs, curve, good, err = _mean_outputs(recs)
             ok &= good
             suffix = "" if len(tg) == 1 else f"@{(t.sigma_z if t else sigma_z) / _MPA:g}MPa#{ti}"
-            for k in ("sigma_f", "dLf_D", "bulk_density_relaxed", "bulk_density_max",
+            for k in ("sigma_f", "dLf_D", "peaked", "bulk_density_relaxed", "bulk_density_max",
                       "coordination_number_relaxed"):
                 if k in outs:
                     prow[k + suffix] = outs[k]
@@ -1328,7 +1331,8 @@ def _history_row(names, point: _Point, targets) -> dict:
     row = {n: point.params[n] for n in names}
     for i, (t, outs, sc) in enumerate(zip(targets, point.outputs, point.scores)):
         sfx = "" if len(targets) == 1 else f"#{i}"
-        for k in ("sigma_f", "dLf_D", "bulk_density_relaxed", "bulk_density_max", "coordination_number_relaxed"):
+        for k in ("sigma_f", "dLf_D", "peaked", "sigma_f_max", "dLf_D_max", "bulk_density_relaxed",
+                  "bulk_density_max", "coordination_number_relaxed"):
             if k in outs:
                 row[k + sfx] = outs[k]
         for k, v in sc.items():
