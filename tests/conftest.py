@@ -8,6 +8,7 @@ set before the engine (and so libgomp) is loaded, hence here; a value set by the
 import os
 
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+os.environ.setdefault("GOMP_SPINCOUNT", "20000")
 
 
 import pytest  # noqa: E402
