@@ -220,6 +220,26 @@ Wall wall_from_dict(const py::dict& d) {
   return w;
 }
 
+// The broken-bond record as arrays (time s, step, pair, bond centre m, mode 1 tension / 2 shear,
+// stresses Pa at breakage, load marker m).
+py::dict broken_to_dict(const std::vector<BrokenBond>& b) {
+  const std::size_t n = b.size();
+  std::vector<double> t(n), sig(n), tau(n), lm(n);
+  std::vector<long> step(n);
+  std::vector<Index> i(n), j(n);
+  std::vector<std::uint8_t> mode(n);
+  std::vector<Vec3> pos(n);
+  for (std::size_t k = 0; k < n; ++k) {
+    t[k] = b[k].time; step[k] = b[k].step; i[k] = b[k].i; j[k] = b[k].j; pos[k] = b[k].position;
+    mode[k] = static_cast<std::uint8_t>(b[k].mode); sig[k] = b[k].sigma; tau[k] = b[k].tau; lm[k] = b[k].load_marker;
+  }
+  py::dict d;
+  d["time"] = copy_vector(t); d["step"] = copy_vector(step); d["i"] = copy_vector(i); d["j"] = copy_vector(j);
+  d["position"] = copy_vec3(pos); d["mode"] = copy_vector(mode); d["sigma"] = copy_vector(sig);
+  d["tau"] = copy_vector(tau); d["load_marker"] = copy_vector(lm);
+  return d;
+}
+
 py::dict state_to_dict(const WorldState& s) {
   py::dict d;
   d["time"] = s.time; d["step"] = s.step; d["ramp_start"] = s.ramp_start; d["ramp_duration"] = s.ramp_duration;
@@ -247,20 +267,7 @@ py::dict state_to_dict(const WorldState& s) {
   d["bond_fn"] = copy_vector(fn); d["bond_mn"] = copy_vector(mn); d["bond_radius"] = copy_vector(rad);
   d["bond_kn"] = copy_vector(kn); d["bond_kt"] = copy_vector(kt); d["bond_sigma_c"] = copy_vector(sc);
   d["bond_tau_c"] = copy_vector(tc); d["bond_n_prev"] = copy_vec3(np_); d["bond_ft"] = copy_vec3(ft); d["bond_mt"] = copy_vec3(mt);
-  const std::size_t nk = s.broken.size();
-  std::vector<double> kt_(nk), ks(nk), ktau(nk), klm(nk);
-  std::vector<long> kstep(nk);
-  std::vector<Index> ki(nk), kj(nk);
-  std::vector<std::uint8_t> kmode(nk);
-  std::vector<Vec3> kpos(nk);
-  for (std::size_t k = 0; k < nk; ++k) {
-    const BrokenBond& b = s.broken[k];
-    kt_[k] = b.time; kstep[k] = b.step; ki[k] = b.i; kj[k] = b.j; kpos[k] = b.position;
-    kmode[k] = static_cast<std::uint8_t>(b.mode); ks[k] = b.sigma; ktau[k] = b.tau; klm[k] = b.load_marker;
-  }
-  d["broken_time"] = copy_vector(kt_); d["broken_step"] = copy_vector(kstep); d["broken_i"] = copy_vector(ki);
-  d["broken_j"] = copy_vector(kj); d["broken_position"] = copy_vec3(kpos); d["broken_mode"] = copy_vector(kmode);
-  d["broken_sigma"] = copy_vector(ks); d["broken_tau"] = copy_vector(ktau); d["broken_load_marker"] = copy_vector(klm);
+  for (auto item : broken_to_dict(s.broken)) d[py::str("broken_" + item.first.cast<std::string>())] = item.second;
   return d;
 }
 
@@ -627,25 +634,7 @@ PYBIND11_MODULE(_core, m) {
              else throw ParameterError(cat("unknown bond property '", name, "': allowed radius, kn, kt, sigma_c, tau_c"));
              for (std::size_t k = 0; k < v.size(); ++k) b[k].*field = v[k];
            })
-      .def("broken_bonds",
-           [](const World& w) {
-             const auto& b = w.broken_bonds();
-             const std::size_t n = b.size();
-             std::vector<double> t(n), sig(n), tau(n), lm(n);
-             std::vector<long> step(n);
-             std::vector<Index> i(n), j(n);
-             std::vector<std::uint8_t> mode(n);
-             std::vector<Vec3> pos(n);
-             for (std::size_t k = 0; k < n; ++k) {
-               t[k] = b[k].time; step[k] = b[k].step; i[k] = b[k].i; j[k] = b[k].j; pos[k] = b[k].position;
-               mode[k] = static_cast<std::uint8_t>(b[k].mode); sig[k] = b[k].sigma; tau[k] = b[k].tau; lm[k] = b[k].load_marker;
-             }
-             py::dict d;
-             d["time"] = copy_vector(t); d["step"] = copy_vector(step); d["i"] = copy_vector(i); d["j"] = copy_vector(j);
-             d["position"] = copy_vec3(pos); d["mode"] = copy_vector(mode); d["sigma"] = copy_vector(sig);
-             d["tau"] = copy_vector(tau); d["load_marker"] = copy_vector(lm);
-             return d;
-           });
+      .def("broken_bonds", [](const World& w) { return broken_to_dict(w.broken_bonds()); });
 
   m.def("truncated_normal_radii", &truncated_normal_radii, py::arg("n"), py::arg("mean"), py::arg("sd"),
         py::arg("r_min"), py::arg("r_max"), py::arg("seed"),

@@ -387,24 +387,29 @@ double World::kinetic_energy() const {
   return e;
 }
 
-Vec3 World::mean_velocity() const {
-  Vec3 mom = Vec3::Zero();
+namespace {
+// Total momentum and mass of the particles.
+double momentum(const Particles& p, Vec3& mom) {
+  mom.setZero();
   double mass = 0.0;
-  for (std::size_t i = 0; i < p_.size(); ++i) {
-    mom += p_.m[i] * p_.v[i];
-    mass += p_.m[i];
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    mom += p.m[i] * p.v[i];
+    mass += p.m[i];
   }
+  return mass;
+}
+}  // namespace
+
+Vec3 World::mean_velocity() const {
+  Vec3 mom;
+  const double mass = momentum(p_, mom);
   return mass > 0.0 ? Vec3(mom / mass) : Vec3::Zero();
 }
 
 double World::internal_kinetic_energy() const {
   // E - |P|^2 / (2 M): the translation of the whole assembly removed.
-  Vec3 mom = Vec3::Zero();
-  double mass = 0.0;
-  for (std::size_t i = 0; i < p_.size(); ++i) {
-    mom += p_.m[i] * p_.v[i];
-    mass += p_.m[i];
-  }
+  Vec3 mom;
+  const double mass = momentum(p_, mom);
   const double e = kinetic_energy() - (mass > 0.0 ? 0.5 * mom.squaredNorm() / mass : 0.0);
   return std::max(e, 0.0);
 }
