@@ -40,12 +40,10 @@ PELLETDEM_INLINE void small_angle_sin_cos(double phi, double& s, double& c) {
   }
 }
 
-// Parallel bond update, eq. 12, and breakage test, eq. 14. `step` is the world's step count:
-// increments are taken once per step (see Bond::step_updated).
-PELLETDEM_INLINE BondResult update_bond(Bond& b, const Particles& p, double dt_step, long step) {
+// Parallel bond update, eq. 12, and breakage test, eq. 14. `dt` is the increment: zero when
+// forces are recomputed in place (compute_forces' `advance`), like the contacts' springs.
+PELLETDEM_INLINE BondResult update_bond(Bond& b, const Particles& p, double dt) {
   BondResult out{Vec3::Zero(), Vec3::Zero(), Vec3::Zero(), false};
-  const double dt = (b.step_updated == step) ? 0.0 : dt_step;
-  b.step_updated = step;
   const Index i = b.i, j = b.j;
   const Vec3 d = p.x[j] - p.x[i];
   const double dist = d.norm();
@@ -204,7 +202,7 @@ void World::compute_forces(bool advance) {
       for (long b = 0; b < nbonds; ++b) {
         Bond& bond = bonds_[b];
         if (bond.mode != BondMode::Intact) continue;
-        const BondResult r = update_bond(bond, p_, dt, step_);
+        const BondResult r = update_bond(bond, p_, dt_inc);
         if (r.broke) {
           broke_t[tid].push_back(b);
           continue;

@@ -74,7 +74,6 @@ void World::load_state(const WorldState& s) {
   }
   bonds_ = s.bonds;
   // The bonds' increments were last taken at the saved step (a state dict does not carry it).
-  for (Bond& b : bonds_) b.step_updated = s.step;
   broken_ = s.broken;
   time_ = s.time;
   step_ = s.step;

@@ -495,7 +495,6 @@ long World::create_bonds(const BondParams& bp) {
       b.i = static_cast<Index>(i);
       b.j = j;
       b.n_prev = d / dist;
-      b.step_updated = step_;  // stress-free now: no increment until the next step
       b.radius = bp.radius;
       b.kn = bp.youngs_modulus / rsum;  // eq. 13
       b.kt = bp.kt_ratio * b.kn;

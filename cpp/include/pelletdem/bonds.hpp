@@ -31,12 +31,6 @@ struct Bond {
   Vec3 mt = Vec3::Zero();   // bending moment on j, N m
   double radius, kn, kt, sigma_c, tau_c;  // per bond, so spreads of strength are possible
   BondMode mode = BondMode::Intact;
-  // World step at which the increments of eq. 12 were last taken. Forces are evaluated a
-  // second time at the same step when the state was set from outside (set_positions,
-  // set_velocities: World::invalidate); no time has passed then, so that evaluation turns the
-  // stored vectors with the pair but adds no increment (else each reset adds v dt of spurious
-  // stretch, and a clamp reset every step doubles the bond's apparent stiffness).
-  long step_updated = 0;
 
   double area() const { return kPi * radius * radius; }
   double polar_moment() const { return 0.5 * kPi * radius * radius * radius * radius; }
