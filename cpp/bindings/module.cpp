@@ -5,7 +5,9 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
+#include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstring>
 
 #include "pelletdem/errors.hpp"
@@ -109,8 +111,11 @@ py::array view_of(World& w, const T* data, std::size_t n, std::size_t width, py:
 }
 
 // Runs the engine in chunks with the GIL released; returns (condition index, steps run).
+// `between(done)` is called only when the run goes on after a chunk: the world then sits
+// between two steps and no stop condition has fired, so a checkpoint taken there resumes
+// exactly (one taken after the chunk that met a condition would run past it on resume).
 py::tuple run_chunked(World& w, std::vector<StopCondition> conds, long max_steps,
-                      const py::object& progress) {
+                      const py::object& progress, const py::object& between) {
   if (max_steps < 0) throw ParameterError(cat("max_steps = ", max_steps, " must be >= 0"));
   // "Steps" counts over the whole call, so it becomes the budget rather than a per-chunk test.
   std::vector<int> index_map;
@@ -120,7 +125,7 @@ py::tuple run_chunked(World& w, std::vector<StopCondition> conds, long max_steps
   for (std::size_t k = 0; k < conds.size(); ++k) {
     if (conds[k].kind == StopKind::Steps) {
       if (!(conds[k].value >= 0)) throw ParameterError("stop condition steps must be >= 0");
-      if (static_cast<long>(conds[k].value) <= steps_limit) {
+      if (conds[k].value <= static_cast<double>(steps_limit)) {  // compared as doubles: 1e300 must not overflow a long
         steps_limit = static_cast<long>(conds[k].value);
         steps_index = static_cast<int>(k);
       }
@@ -129,7 +134,10 @@ py::tuple run_chunked(World& w, std::vector<StopCondition> conds, long max_steps
       index_map.push_back(static_cast<int>(k));
     }
   }
-  long done = 0, chunk = 200;
+  // The first chunk is sized by the particle count (~2e5 particle-steps, tens of ms), so
+  // even a 40,000-particle world answers Ctrl-C well within a second from the start.
+  const long n_particles = static_cast<long>(w.particles().size());
+  long done = 0, chunk = std::clamp(200000L / std::max(n_particles, 1L), 1L, 200L);
   while (true) {
     const long this_chunk = std::min(chunk, steps_limit - done);
     RunOutcome r;
@@ -145,6 +153,7 @@ py::tuple run_chunked(World& w, std::vector<StopCondition> conds, long max_steps
     if (!progress.is_none()) progress(done);
     if (r.condition >= 0) return py::make_tuple(index_map[r.condition], done);
     if (done >= steps_limit) return py::make_tuple(done >= max_steps && steps_index < 0 ? -1 : steps_index, done);
+    if (!between.is_none()) between(done);
     // Aim for ~0.1 s per chunk so an interrupt is served well within a second.
     if (seconds > 0.0) chunk = std::clamp(static_cast<long>(this_chunk * 0.1 / seconds), 1L, 1000000L);
     else chunk = std::min(chunk * 4, 1000000L);
@@ -184,6 +193,13 @@ py::dict wall_to_dict(const Wall& w) {
   d["servo_max_speed"] = w.servo_max_speed;
   d["travel"] = w.travel;
   d["moved_since_build"] = w.moved_since_build;
+  // The last force evaluation's results: a stage reads them before its first step (the
+  // unloading stage takes the piston's peak load from them), so a restored world needs them.
+  d["force"] = copy_vec3({w.force});
+  d["torque"] = copy_vec3({w.torque});
+  d["max_overlap_ratio"] = w.max_overlap_ratio;
+  d["max_overlap_particle"] = static_cast<long>(w.max_overlap_particle);
+  d["crushable"] = w.crushable;
   std::vector<Index> ci;
   std::vector<double> d0;
   std::vector<Vec3> ft;
@@ -212,6 +228,15 @@ Wall wall_from_dict(const py::dict& d) {
   w.servo_max_speed = d["servo_max_speed"].cast<double>();
   w.travel = d["travel"].cast<double>();
   w.moved_since_build = d["moved_since_build"].cast<double>();
+  if (d.contains("force")) {  // older checkpoints lack them: zero until the next step
+    w.force = vec3_from(d, "force").at(0);
+    w.torque = vec3_from(d, "torque").at(0);
+    w.max_overlap_ratio = d["max_overlap_ratio"].cast<double>();
+    const long who = d["max_overlap_particle"].cast<long>();
+    if (who < 0) throw ParameterError("state: wall max_overlap_particle must be >= 0");
+    w.max_overlap_particle = static_cast<Index>(who);
+  }
+  w.crushable = d.contains("crushable") ? d["crushable"].cast<bool>() : false;  // older checkpoints
   auto ci = from_array<Index>(d, "contact_i");
   auto d0 = from_array<double>(d, "contact_delta0");
   auto ft = vec3_from(d, "contact_ft");
@@ -255,17 +280,19 @@ py::dict state_to_dict(const WorldState& s) {
   const std::size_t nb = s.bonds.size();
   std::vector<Index> bi(nb), bj(nb);
   std::vector<std::uint8_t> mode(nb);
-  std::vector<double> fn(nb), mn(nb), rad(nb), kn(nb), kt(nb), sc(nb), tc(nb);
+  std::vector<double> fn(nb), mn(nb), rad(nb), kn(nb), kt(nb), sc(nb), tc(nb), soft(nb), dmg(nb);
   std::vector<Vec3> np_(nb), ft(nb), mt(nb);
   for (std::size_t k = 0; k < nb; ++k) {
     const Bond& b = s.bonds[k];
     bi[k] = b.i; bj[k] = b.j; mode[k] = static_cast<std::uint8_t>(b.mode); fn[k] = b.fn; mn[k] = b.mn;
     rad[k] = b.radius; kn[k] = b.kn; kt[k] = b.kt; sc[k] = b.sigma_c; tc[k] = b.tau_c;
+    soft[k] = b.softening; dmg[k] = b.damage;
     np_[k] = b.n_prev; ft[k] = b.ft; mt[k] = b.mt;
   }
   d["bond_i"] = copy_vector(bi); d["bond_j"] = copy_vector(bj); d["bond_mode"] = copy_vector(mode);
   d["bond_fn"] = copy_vector(fn); d["bond_mn"] = copy_vector(mn); d["bond_radius"] = copy_vector(rad);
   d["bond_kn"] = copy_vector(kn); d["bond_kt"] = copy_vector(kt); d["bond_sigma_c"] = copy_vector(sc);
+  d["bond_softening"] = copy_vector(soft); d["bond_damage"] = copy_vector(dmg);
   d["bond_tau_c"] = copy_vector(tc); d["bond_n_prev"] = copy_vec3(np_); d["bond_ft"] = copy_vec3(ft); d["bond_mt"] = copy_vec3(mt);
   for (auto item : broken_to_dict(s.broken)) d[py::str("broken_" + item.first.cast<std::string>())] = item.second;
   return d;
@@ -289,6 +316,11 @@ WorldState state_from_dict(const py::dict& d) {
   auto sc = from_array<double>(d, "bond_sigma_c"), tc = from_array<double>(d, "bond_tau_c");
   auto np_ = vec3_from(d, "bond_n_prev"), ft = vec3_from(d, "bond_ft"), mt = vec3_from(d, "bond_mt");
   const std::size_t nb = bi.size();
+  // Softening arrived with checkpoint format 1 still current: older files have brittle bonds.
+  std::vector<double> soft(nb, 0.0), dmg(nb, 0.0);
+  if (d.contains("bond_softening")) soft = from_array<double>(d, "bond_softening");
+  if (d.contains("bond_damage")) dmg = from_array<double>(d, "bond_damage");
+  if (soft.size() != nb || dmg.size() != nb) throw ParameterError("state: bond arrays differ in length");
   for (auto* v : {&bj}) if (v->size() != nb) throw ParameterError("state: bond arrays differ in length");
   if (mode.size() != nb || fn.size() != nb || mn.size() != nb || rad.size() != nb || kn.size() != nb || kt.size() != nb ||
       sc.size() != nb || tc.size() != nb || np_.size() != nb || ft.size() != nb || mt.size() != nb)
@@ -299,6 +331,9 @@ WorldState state_from_dict(const py::dict& d) {
     b.i = bi[k]; b.j = bj[k]; b.mode = static_cast<BondMode>(mode[k]); b.fn = fn[k]; b.mn = mn[k];
     b.radius = rad[k]; b.kn = kn[k]; b.kt = kt[k]; b.sigma_c = sc[k]; b.tau_c = tc[k];
     b.n_prev = np_[k]; b.ft = ft[k]; b.mt = mt[k];
+    if (!(dmg[k] >= 0.0 && dmg[k] < 1.0) || !(soft[k] >= 0.0))
+      throw ParameterError(cat("state: bond ", k, " has damage ", dmg[k], " (allowed 0 <= damage < 1) or softening ", soft[k], " (allowed >= 0)"));
+    b.softening = soft[k]; b.damage = dmg[k];
     s.bonds.push_back(b);
   }
   auto kt_ = from_array<double>(d, "broken_time");
@@ -314,6 +349,52 @@ WorldState state_from_dict(const py::dict& d) {
   for (std::size_t k = 0; k < nk; ++k)
     s.broken.push_back(BrokenBond{kt_[k], kstep[k], ki[k], kj[k], kpos[k], static_cast<BondMode>(kmode[k]), ks[k], ktau[k], klm[k]});
   return s;
+}
+
+// Radii are drawn by rejection, so a range holding almost none of the distribution (sd huge,
+// infinite, or the range far in a tail) would loop for ever; refuse it before drawing. The
+// count is capped so that a huge n is an error, not an 8n-byte allocation.
+constexpr double kMaxRadii = 1e7;
+constexpr double kMinAcceptance = 1e-3;
+
+std::vector<double> checked_truncated_normal_radii(long n, double mean, double sd, double r_min,
+                                                   double r_max, std::uint64_t seed) {
+  require_range("n", static_cast<double>(n), 0, kMaxRadii, "particles");
+  if (std::isfinite(mean) && std::isfinite(r_min) && std::isfinite(r_max) && sd > 0.0 &&
+      r_max >= r_min) {
+    // Fraction of N(mean, sd) inside [r_min, r_max]; 0 for an infinite sd.
+    const double s = std::isfinite(sd) ? sd * std::sqrt(2.0) : HUGE_VAL;
+    const double p = 0.5 * (std::erfc((mean - r_max) / s) - std::erfc((mean - r_min) / s));
+    if (!(p >= kMinAcceptance))
+      throw ParameterError(cat("radius range [r_min, r_max] = [", r_min, ", ", r_max,
+                               "] m holds a fraction ", p, " of the normal distribution (mean ",
+                               mean, " m, sd ", sd, " m): allowed >= ", kMinAcceptance,
+                               " (narrow sd or widen the range)"));
+  }
+  return truncated_normal_radii(n, mean, sd, r_min, r_max, seed);
+}
+
+// The placement grid indexes cells of 2 r_max with ints and hashes them into a 64-bit key:
+// coordinates must be finite and within a million cells of the origin, and the region must
+// be tall enough for the largest sphere (else it is placed outside it).
+void check_pack_region(const std::vector<double>& r, double cx, double cy, double radius,
+                       double z_lo, double z_hi) {
+  require(std::isfinite(cx) && std::isfinite(cy), cat("fill centre (", cx, ", ", cy, ") m must be finite"));
+  require(std::isfinite(z_lo) && std::isfinite(z_hi),
+          cat("fill region z_lo = ", z_lo, " m, z_hi = ", z_hi, " m must be finite"));
+  require_positive("fill radius", radius, "m");
+  double r_max = 0.0;
+  for (double q : r)
+    if (q > 0.0 && std::isfinite(q)) r_max = std::max(r_max, q);
+  if (r_max <= 0.0) return;  // no valid radius: the engine names the bad one
+  const double reach = std::max({std::abs(cx) + radius, std::abs(cy) + radius, std::abs(z_lo), std::abs(z_hi)});
+  if (!(reach / (2.0 * r_max) < 1e6))
+    throw ParameterError(cat("fill region reaches ", reach, " m from the origin, more than 1e6 particle "
+                             "diameters (2 r_max = ", 2.0 * r_max, " m): allowed |coordinate| < ",
+                             2e6 * r_max, " m"));
+  require(z_hi - z_lo >= 2.0 * r_max,
+          cat("fill region height z_hi - z_lo = ", z_hi - z_lo, " m must be >= the largest diameter ",
+              2.0 * r_max, " m"));
 }
 
 }  // namespace
@@ -345,6 +426,8 @@ PYBIND11_MODULE(_core, m) {
       .def_readwrite("r_ref", &ContactLawParams::r_ref)
       .def_readwrite("hardening", &ContactLawParams::hardening)
       .def_readwrite("hardening_exponent", &ContactLawParams::hardening_exponent)
+      .def_readwrite("unloading_growth", &ContactLawParams::unloading_growth)
+      .def_readwrite("plate_yield_stress", &ContactLawParams::plate_yield_stress)
       .def("restitution", &ContactLawParams::restitution)
       .def("validate", &ContactLawParams::validate);
 
@@ -356,6 +439,13 @@ PYBIND11_MODULE(_core, m) {
       .def_readwrite("sigma_c", &BondParams::sigma_c)
       .def_readwrite("tau_c", &BondParams::tau_c)
       .def_readwrite("gap_tolerance", &BondParams::gap_tolerance)
+      .def_readwrite("weibull_modulus", &BondParams::weibull_modulus)
+      .def_readwrite("strength_seed", &BondParams::strength_seed)
+      .def_readwrite("softening", &BondParams::softening)
+      .def_readwrite("overlap_radius_gain", &BondParams::overlap_radius_gain)
+      .def_readwrite("moisture_content", &BondParams::moisture_content)
+      .def_readwrite("moisture_reference", &BondParams::moisture_reference)
+      .def_readwrite("moisture_coefficient", &BondParams::moisture_coefficient)
       .def("validate", &BondParams::validate);
 
   py::class_<WorldParams>(m, "WorldParams")
@@ -400,7 +490,31 @@ PYBIND11_MODULE(_core, m) {
       .def("clone", &World::clone)
       .def("get_state", [](const World& w) { return state_to_dict(w.save_state()); },
            "The whole state as a dict of numpy arrays (see pelletdem.checkpoint).")
-      .def("set_state", [](World& w, const py::dict& d) { w.load_state(state_from_dict(d)); },
+      .def("set_state",
+           [](World& w, const py::object& obj) {
+             if (!py::isinstance<py::dict>(obj))
+               throw ParameterError(cat("state must be a dict from get_state(), got ",
+                                        py::str(py::type::of(obj).attr("__name__")).cast<std::string>()));
+             WorldState s;
+             // A missing key, a value of the wrong type or an empty array is a broken state
+             // dict: say so as a ParameterError, not a KeyError or IndexError from deep inside.
+             try {
+               s = state_from_dict(obj.cast<py::dict>());
+             } catch (const ParameterError&) {
+               throw;
+             } catch (const py::error_already_set& e) {
+               throw ParameterError(cat("state: malformed (", e.what(), ")"));
+             } catch (const py::cast_error& e) {
+               throw ParameterError(cat("state: a value has the wrong type (", e.what(), ")"));
+             } catch (const std::out_of_range& e) {
+               throw ParameterError(cat("state: an array is empty or too short (", e.what(), ")"));
+             }
+             if (!std::isfinite(s.time) || s.step < 0 || !std::isfinite(s.ramp_start) ||
+                 !std::isfinite(s.ramp_duration) || !std::isfinite(s.max_overlap_seen))
+               throw ParameterError(cat("state: time = ", s.time, " s, step = ", s.step,
+                                        ", ramp and max_overlap_seen must be finite (step >= 0)"));
+             w.load_state(s);
+           },
            "Restore a state from get_state() into a world built with the same parameters.")
       .def("add_particles",
            [](World& w, const py::object& x, const py::object& r) {
@@ -445,8 +559,15 @@ PYBIND11_MODULE(_core, m) {
              try { wl.validate(); } catch (...) { wl.servo = false; throw; }
            })
       .def("set_wall_active", [](World& w, int k, bool a) { w.wall(k).active = a; w.invalidate(); })
+      .def("set_wall_crushable", [](World& w, int k, bool c) { w.wall(k).crushable = c; w.invalidate(); },
+           "Contacts with wall k obey the contact law's plate_yield_stress (crushing under the plates).")
       .def("set_wall_point",
-           [](World& w, int k, const std::vector<double>& p) { w.wall(k).point = to_vec3(p, "point"); w.invalidate(); })
+           [](World& w, int k, const std::vector<double>& p) {
+             const Vec3 q = to_vec3(p, "point");
+             if (!q.allFinite()) throw ParameterError("wall point must be finite (m)");
+             w.wall(k).point = q;
+             w.invalidate();
+           })
       .def("set_wall_radius",
            [](World& w, int k, double r) {
              require_positive("cylinder radius", r, "m");
@@ -488,7 +609,11 @@ PYBIND11_MODULE(_core, m) {
       .def("set_max_overlap_ratio", &World::set_max_overlap_ratio)
       .def("set_sample_interval", &World::set_sample_interval)
       .def("run_until", &run_chunked, py::arg("conditions"), py::arg("max_steps"),
-           py::arg("progress") = py::none())
+           py::arg("progress") = py::none(), py::arg("between") = py::none())
+      .def_property_readonly("sample_interval", [](const World& w) { return w.params().sample_interval; },
+                             "Steps between time-series samples.")
+      .def_property_readonly("max_overlap_ratio", [](const World& w) { return w.params().max_overlap_ratio; },
+                             "The overlap guard: delta / r beyond it stops a run.")
       .def("step", [](World& w) { py::gil_scoped_release r; w.step(); })
       .def_property_readonly("time", &World::time)
       .def_property_readonly("step_count", &World::step_count)
@@ -601,19 +726,19 @@ PYBIND11_MODULE(_core, m) {
              const std::size_t n = b.size();
              std::vector<Index> i(n), j(n);
              std::vector<std::uint8_t> mode(n);
-             std::vector<double> fn(n), mn(n), rad(n), kn(n), kt(n), sc(n), tc(n), sig(n), tau(n);
+             std::vector<double> fn(n), mn(n), rad(n), kn(n), kt(n), sc(n), tc(n), sig(n), tau(n), dmg(n);
              std::vector<Vec3> ft(n), mt(n);
              for (std::size_t k = 0; k < n; ++k) {
                i[k] = b[k].i; j[k] = b[k].j; mode[k] = static_cast<std::uint8_t>(b[k].mode);
                fn[k] = b[k].fn; mn[k] = b[k].mn; ft[k] = b[k].ft; mt[k] = b[k].mt;
                rad[k] = b[k].radius; kn[k] = b[k].kn; kt[k] = b[k].kt; sc[k] = b[k].sigma_c; tc[k] = b[k].tau_c;
-               sig[k] = b[k].sigma_max(); tau[k] = b[k].tau_max();
+               sig[k] = b[k].sigma_max(); tau[k] = b[k].tau_max(); dmg[k] = b[k].damage;
              }
              py::dict d;
              d["i"] = copy_vector(i); d["j"] = copy_vector(j); d["mode"] = copy_vector(mode);
              d["fn"] = copy_vector(fn); d["ft"] = copy_vec3(ft); d["mn"] = copy_vector(mn); d["mt"] = copy_vec3(mt);
              d["radius"] = copy_vector(rad); d["kn"] = copy_vector(kn); d["kt"] = copy_vector(kt);
-             d["sigma_c"] = copy_vector(sc); d["tau_c"] = copy_vector(tc);
+             d["sigma_c"] = copy_vector(sc); d["tau_c"] = copy_vector(tc); d["damage"] = copy_vector(dmg);
              d["sigma_max"] = copy_vector(sig); d["tau_max"] = copy_vector(tau);
              return d;
            })
@@ -636,13 +761,14 @@ PYBIND11_MODULE(_core, m) {
            })
       .def("broken_bonds", [](const World& w) { return broken_to_dict(w.broken_bonds()); });
 
-  m.def("truncated_normal_radii", &truncated_normal_radii, py::arg("n"), py::arg("mean"), py::arg("sd"),
+  m.def("truncated_normal_radii", &checked_truncated_normal_radii, py::arg("n"), py::arg("mean"), py::arg("sd"),
         py::arg("r_min"), py::arg("r_max"), py::arg("seed"),
         "Radii (m) from a normal distribution truncated to [r_min, r_max], seeded.");
   m.def("random_pack_cylinder",
         [](const py::object& radii, double cx, double cy, double radius, double z_lo, double z_hi,
            std::uint64_t seed, long max_attempts) {
           std::vector<double> r = to_vector(radii, "radii");
+          check_pack_region(r, cx, cy, radius, z_lo, z_hi);
           std::vector<Vec3> x;
           {
             py::gil_scoped_release rel;

@@ -42,6 +42,9 @@ PELLETDEM_INLINE void small_angle_sin_cos(double phi, double& s, double& c) {
 
 // Parallel bond update, eq. 12, and breakage test, eq. 14. `dt` is the increment: zero when
 // forces are recomputed in place (compute_forces' `advance`), like the contacts' springs.
+// A softening bond whose capacity has fallen below this fraction of its strength is broken.
+constexpr double kSofteningGone = 0.01;
+
 PELLETDEM_INLINE BondResult update_bond(Bond& b, const Particles& p, double dt) {
   BondResult out{Vec3::Zero(), Vec3::Zero(), Vec3::Zero(), false};
   const Index i = b.i, j = b.j;
@@ -91,17 +94,35 @@ PELLETDEM_INLINE BondResult update_bond(Bond& b, const Particles& p, double dt) 
   // Eq. 14 times A: sigma A = -F_n + 4 |M_t| / r_b, tau A = |F_t| + 2 |M_n| / r_b. The 1-norm
   // bounds the 2-norm from above, so most bonds pass without a square root.
   const double inv_r = 1.0 / b.radius;
-  const double fs = b.sigma_c * area, ts = b.tau_c * area;
-  const double sig_bound = -b.fn + 4.0 * inv_r * mt.cwiseAbs().sum();
-  const double tau_bound = ft.cwiseAbs().sum() + 2.0 * inv_r * std::abs(b.mn);
+  const double left = 1.0 - b.damage;  // capacity left (softening bonds), 1 for brittle ones
+  const double fs = left * b.sigma_c * area, ts = left * b.tau_c * area;
+  const double sig_bound = -b.fn + 4.0 * inv_r * b.mt.cwiseAbs().sum();
+  const double tau_bound = b.ft.cwiseAbs().sum() + 2.0 * inv_r * std::abs(b.mn);
   if (sig_bound > fs || tau_bound > ts) {
     const double sigma = b.sigma_max(), tau = b.tau_max();
-    if (sigma > b.sigma_c || tau > b.tau_c) {
-      b.mode = (sigma / b.sigma_c >= tau / b.tau_c) ? BondMode::Tension : BondMode::Shear;
-      out.broke = true;
-      return out;
+    const double q = std::max(sigma / (left * b.sigma_c), tau / (left * b.tau_c));
+    if (q > 1.0) {
+      // Softening: the stress is returned to the shrinking capacity. Eq. 14's stresses are
+      // homogeneous of degree 1 in (F_n, M_t) and (F_t, M_n), so scaling all four by
+      // left_new / (left q) puts the governing one on it. This step's stretch beyond the
+      // capacity, (q - 1) left sigma_c / E_b, lowers it by (q - 1) left sigma_c / s: slope
+      // -E_b / s, zero at (1 + s) times the strain at the peak.
+      const double left_new = (b.softening > 0.0) ? left * (1.0 - (q - 1.0) / b.softening) : 0.0;
+      if (left_new < kSofteningGone) {
+        b.mode = (sigma / b.sigma_c >= tau / b.tau_c) ? BondMode::Tension : BondMode::Shear;
+        out.broke = true;
+        return out;
+      }
+      const double scale = left_new / (left * q);
+      b.fn *= scale;
+      b.mn *= scale;
+      b.ft *= scale;
+      b.mt *= scale;
+      b.damage = 1.0 - left_new;
     }
   }
+  ft = b.ft;
+  mt = b.mt;
   out.f_on_j = b.fn * n + ft;
   const Vec3 moment = b.mn * n + mt;
   const Vec3 nxft = n.cross(ft);
@@ -271,6 +292,8 @@ void World::wall_forces(bool advance) {
     w.max_overlap_ratio = 0.0;
     if (!w.active) continue;
     const long nc = static_cast<long>(w.contacts.size());
+    // Crushing caps the loading force at p_y,plate pi r^2 (kHuge / r^2 stays finite).
+    const double cap_scale = (w.crushable && cp.plate_yield_stress > 0.0) ? kPi * cp.plate_yield_stress : kHuge;
     std::vector<Vec3> f_t(nt, Vec3::Zero()), tq_t(nt, Vec3::Zero());
     std::vector<double> rad_t(nt, 0.0), ov_t(nt, 0.0);
     std::vector<Index> ovi_t(nt, 0);
@@ -295,7 +318,7 @@ void World::wall_forces(bool advance) {
         const double a = p_.r[i] - delta;  // lever arm to the contact point on the wall
         const Vec3 v_rel = p_.v[i] - a * p_.w[i].cross(n_into) - w.surface_velocity(n_into);
         const double vn = v_rel.dot(n_into);
-        ContactKinematics c{delta, vn, v_rel - vn * n_into, n_into, p_.r[i], p_.m[i], true};
+        ContactKinematics c{delta, vn, v_rel - vn * n_into, n_into, p_.r[i], p_.m[i], true, cap_scale * p_.r[i] * p_.r[i]};
         const ContactForce cf = law_.evaluate(c, wc.h, dt_inc, cp.mu_wall, adh);
         const Vec3 fp = cf.fn * n_into + cf.ft;
         p_.f[i] += fp;

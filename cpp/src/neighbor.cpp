@@ -23,9 +23,19 @@ void NeighborList::build(const Particles& p, const Box& box, double skin, double
   // Cells no smaller than the largest possible cutoff, so 27 cells hold every neighbour.
   const double cell = 2.0 * r_max + skin;
   const Vec3 ext = box.hi - box.lo;
-  const int nx = std::max(1, static_cast<int>(ext.x() / cell));
-  const int ny = std::max(1, static_cast<int>(ext.y() / cell));
-  const int nz = std::max(1, static_cast<int>(ext.z() / cell));
+  // Counted in floating point first: an empty world has cell 0 and a 1e300 m box has more
+  // cells than an int holds, and neither may overflow the cast or allocate the grid.
+  auto cells_along = [&](double e) {
+    const double q = cell > 0.0 ? std::floor(e / cell) : 1.0;
+    return q >= 1.0 ? static_cast<int>(std::min(q, 1e9)) : 1;
+  };
+  const int nx = cells_along(ext.x()), ny = cells_along(ext.y()), nz = cells_along(ext.z());
+  constexpr double kMaxCells = 1 << 24;
+  if (static_cast<double>(nx) * ny * nz > kMaxCells)
+    throw ParameterError(cat("the domain box [", box.lo.transpose(), "] .. [", box.hi.transpose(),
+                             "] m is ", static_cast<double>(nx) * ny * nz, " neighbour cells of ",
+                             cell, " m (2 r_max + skin): allowed at most ", kMaxCells,
+                             " cells; shrink the box to the particles' reach"));
   const double sx = nx / ext.x(), sy = ny / ext.y(), sz = nz / ext.z();
   const std::size_t ncell = static_cast<std::size_t>(nx) * ny * nz;
   auto cell_of = [&](const Vec3& x, int& cx, int& cy, int& cz) {

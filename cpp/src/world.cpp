@@ -475,6 +475,26 @@ void World::contacts(std::vector<Index>& ci, std::vector<Index>& cj, std::vector
     }
 }
 
+namespace {
+
+// splitmix64: a bond's strength depends only on (seed, i, j), never on the thread count or
+// the order bonds are made in.
+std::uint64_t mix64(std::uint64_t z) {
+  z += 0x9e3779b97f4a7c15ULL;
+  z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
+  z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
+  return z ^ (z >> 31);
+}
+
+// A Weibull variate of modulus m scaled to mean 1: (-ln(1 - u))^(1/m) / Gamma(1 + 1/m).
+double weibull_unit_mean(double m, std::uint64_t seed, Index i, Index j) {
+  const std::uint64_t h = mix64(mix64(seed) ^ mix64((static_cast<std::uint64_t>(i) << 32) | j));
+  const double u = (static_cast<double>(h >> 11) + 0.5) * 0x1.0p-53;  // in (0, 1)
+  return std::pow(-std::log1p(-u), 1.0 / m) / std::tgamma(1.0 + 1.0 / m);
+}
+
+}  // namespace
+
 long World::create_bonds(const BondParams& bp) {
   bp.validate();
   require(bp.gap_tolerance <= effective_skin(),
@@ -483,6 +503,7 @@ long World::create_bonds(const BondParams& bp) {
   require(bonds_.empty(), "bonds were already created; a world is bonded once");
   ensure_forces();
   rebuild();
+  const double moisture = bp.moisture_factor();
   long created = 0;
   for (std::size_t i = 0; i + 1 < nbr_.start.size(); ++i)
     for (Index k = nbr_.start[i]; k < nbr_.start[i + 1]; ++k) {
@@ -495,11 +516,16 @@ long World::create_bonds(const BondParams& bp) {
       b.i = static_cast<Index>(i);
       b.j = j;
       b.n_prev = d / dist;
-      b.radius = bp.radius;
-      b.kn = bp.youngs_modulus / rsum;  // eq. 13
+      const double r_star = p_.r[i] * p_.r[j] / rsum;
+      b.radius = bp.radius * (1.0 + bp.overlap_radius_gain * std::max(nbr_.history[k].delta0, 0.0) / r_star);
+      b.kn = moisture * bp.youngs_modulus / rsum;  // eq. 13
       b.kt = bp.kt_ratio * b.kn;
-      b.sigma_c = bp.sigma_c;
-      b.tau_c = bp.tau_c;
+      const double spread = bp.weibull_modulus > 0.0
+          ? weibull_unit_mean(bp.weibull_modulus, static_cast<std::uint64_t>(bp.strength_seed), b.i, j)
+          : 1.0;
+      b.sigma_c = moisture * spread * bp.sigma_c;
+      b.tau_c = moisture * spread * bp.tau_c;
+      b.softening = bp.softening;
       bonds_.push_back(b);
       ++created;
     }

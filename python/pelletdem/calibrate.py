@@ -159,6 +159,8 @@ _MPA = 1e6
 
 # Preset fields that do not change fill..relax (they act in the bond and diametral stages).
 _AFTER_RELAX_FIELDS = ("name", "plate_speed", "max_dLD", "bond_ramp_time")
+# Contact-law fields that act only on the diametral plates (crushable walls).
+_AFTER_RELAX_CONTACT = ("plate_yield_stress",)
 
 
 def _canon(v, where: str = "value"):
@@ -229,6 +231,8 @@ class RunSpec:
     def relax_payload(self) -> dict:
         """Everything that determines the relaxed pellet (plain values)."""
         p = {k: v for k, v in self.preset.as_dict().items() if k not in _AFTER_RELAX_FIELDS}
+        # the plates' crushing acts in the diametral test only: one relaxed pellet serves all
+        p["contact"] = {k: v for k, v in p["contact"].items() if k not in _AFTER_RELAX_CONTACT}
         return {"format": CACHE_FORMAT, "version": __version__, "engine": engine_fingerprint(), "preset": p,
                 "sigma_z": float(self.sigma_z), "seed": int(self.seed)}
 
@@ -239,6 +243,7 @@ class RunSpec:
         if self.bond is not None:
             d["bond"] = dataclasses.asdict(self.bond)
             d["after_relax"] = {k: getattr(self.preset, k) for k in _AFTER_RELAX_FIELDS if k != "name"}
+            d["after_relax"].update({k: getattr(self.preset.contact, k) for k in _AFTER_RELAX_CONTACT})
         return d
 
     @property

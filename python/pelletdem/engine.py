@@ -41,6 +41,10 @@ class ContactLaw:
     scale_with_radius: k scaled by 2 r*/r_ref per pair (eq. 7's proportionality to radius).
     hardening, hardening_exponent: optional stiffening of the loading branch,
     k1 (1 + hardening (delta/r*)^exponent); 0 is the paper's linear law.
+    unloading_growth: optional unloading stiffness growing with the residual overlap,
+    k2 (1 + unloading_growth delta0/r*) (after Luding); 0 is the paper's constant k2.
+    plate_yield_stress: optional crushing under the diametral plates, Pa: their contacts'
+    loading force is capped at plate_yield_stress pi r^2; 0 switches it off.
     """
 
     k1: float = 1.0e5
@@ -57,6 +61,8 @@ class ContactLaw:
     r_ref: float = 2.0e-4
     hardening: float = 0.0
     hardening_exponent: float = 1.0
+    unloading_growth: float = 0.0
+    plate_yield_stress: float = 0.0
 
     @property
     def restitution(self) -> float:
@@ -79,6 +85,15 @@ class BondLaw:
     radius: r_b, m (20e-6 in the paper). youngs_modulus: E_b, Pa (k_n^b = E_b/(r_i + r_j)).
     kt_ratio: k_t^b / k_n^b (left open by the paper; 1). sigma_c, tau_c: strengths, Pa.
     gap_tolerance: pairs whose surfaces are closer than this get a bond too, m (0: touching).
+
+    Optional effects the paper's bonds lack (all off by default; see the discrepancy loop,
+    :mod:`pelletdem.loop`): weibull_modulus (-, 0 off) and strength_seed: a Weibull spread of
+    the bonds' strengths with mean sigma_c, tau_c; softening (-, 0 brittle): past its strength
+    a bond's capacity falls linearly to zero at (1 + softening) times its peak strain;
+    overlap_radius_gain (-): r_b,ij = radius (1 + gain delta0_ij / r*_ij) with delta0 the
+    contact's residual overlap at bonding; moisture_content, moisture_reference (%) and
+    moisture_coefficient (1/%): E_b and the strengths times
+    exp(-coefficient (content - reference)).
     """
 
     radius: float = 2.0e-5
@@ -87,6 +102,13 @@ class BondLaw:
     sigma_c: float = 36e6
     tau_c: float = 36e6
     gap_tolerance: float = 0.0
+    weibull_modulus: float = 0.0
+    strength_seed: float = 0.0
+    softening: float = 0.0
+    overlap_radius_gain: float = 0.0
+    moisture_content: float = 8.0
+    moisture_reference: float = 8.0
+    moisture_coefficient: float = 0.0
 
     def to_core(self) -> _core.BondParams:
         """The C++ parameter struct, validated."""
@@ -222,6 +244,18 @@ class World:
         `law` is a BondLaw (or the engine's BondParams). Returns the number of bonds."""
         core = law.to_core() if isinstance(law, BondLaw) else law
         return self._core.create_bonds(core)
+
+    @property
+    def contact_law(self) -> ContactLaw:
+        """The contact law in force now (a copy; change it with :meth:`set_contact_law`)."""
+        return ContactLaw(**_contact_dict(self._core.contact_params))
+
+    def set_contact_law(self, law: ContactLaw) -> None:
+        """Replace the contact law from the next step on (validated first; contact histories
+        are kept). Saved states record the law in force."""
+        if not isinstance(law, ContactLaw):
+            raise ParameterError(f"law must be a ContactLaw, got {type(law).__name__}")
+        self._core.set_contact_params(law.to_core())
 
     def get_state(self) -> dict:
         """The whole state (particles with their last forces, every contact's history, walls,

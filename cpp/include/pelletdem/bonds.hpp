@@ -17,7 +17,27 @@ struct BondParams {
   double sigma_c = 36e6;           // tension strength, Pa
   double tau_c = 36e6;             // shear strength, Pa
   double gap_tolerance = 0.0;      // bond pairs whose surfaces are closer than this, m
+
+  // Optional effects the paper's bonds lack (each off at its default; see docs/model.md).
+  // A spread of strengths: each bond's sigma_c and tau_c are the values above times a
+  // Weibull variate of modulus weibull_modulus and mean 1, drawn from (strength_seed, i, j).
+  double weibull_modulus = 0.0;    // m (-); 0: every bond has the same strength
+  double strength_seed = 0.0;      // integer seed of the strength draw
+  // Softening before breakage: past its strength a bond's capacity falls linearly with further
+  // stretching and reaches zero at (1 + softening) times the strain at its peak (slope
+  // -E_b / softening); 0: brittle, the paper's eq. 14.
+  double softening = 0.0;          // (-)
+  // Bond radius growing with the contact's plastic flattening at bonding (so with compaction
+  // pressure): r_b,ij = radius (1 + overlap_radius_gain delta0_ij / r*_ij).
+  double overlap_radius_gain = 0.0;  // (-)
+  // Moisture: E_b, sigma_c and tau_c times exp(-moisture_coefficient (moisture_content -
+  // moisture_reference)); moisture_coefficient 0 switches it off.
+  double moisture_content = 8.0;      // %
+  double moisture_reference = 8.0;    // %
+  double moisture_coefficient = 0.0;  // 1/%
   void validate() const;
+  // Multiplier of E_b and the strengths for the moisture effect (1 when it is off).
+  double moisture_factor() const;
 };
 
 enum class BondMode : std::uint8_t { Intact = 0, Tension = 1, Shear = 2 };
@@ -30,6 +50,8 @@ struct Bond {
   double mn = 0.0;      // twisting moment on j about n, N m
   Vec3 mt = Vec3::Zero();   // bending moment on j, N m
   double radius, kn, kt, sigma_c, tau_c;  // per bond, so spreads of strength are possible
+  double softening = 0.0;  // BondParams::softening of this bond
+  double damage = 0.0;     // 0 intact .. 1 gone: the capacity left is (1 - damage) sigma_c, tau_c
   BondMode mode = BondMode::Intact;
 
   double area() const { return kPi * radius * radius; }

@@ -45,6 +45,17 @@ struct ContactLawParams {
   // r* is the pair's equivalent radius. 0 switches it off.
   double hardening = 0.0;
   double hardening_exponent = 1.0;
+  // Unloading stiffness that grows with plastic deformation (after Luding 2008, where k2 grows
+  // with the largest overlap): k2(delta0) = k2 (1 + unloading_growth delta0 / r*), delta0 the
+  // residual overlap, which on the loading line grows with the largest overlap. A flattened
+  // contact springs back less; 0 is the paper's constant k2. Signature: less spring-back after
+  // compaction (higher relaxed density, the more so at higher pressure), loading unchanged.
+  double unloading_growth = 0.0;
+  // Crushing where the diametral plates touch the pellet: on walls marked crushable (the
+  // plates) the loading branch is capped at plate_yield_stress * pi r^2, so a particle under a
+  // plate flattens at constant force instead of stiffening. 0 switches it off. Signature: a
+  // longer toe of sigma_1(dL/D), failure at larger dL/D, little change of the peak.
+  double plate_yield_stress = 0.0;
 
   double restitution() const { return std::sqrt(k1 / k2); }  // eq. 8
 
@@ -64,6 +75,8 @@ struct ContactLawParams {
     require_positive("r_ref", r_ref, "m");
     require_range("hardening", hardening, 0.0, 1.0e4);
     require_range("hardening_exponent", hardening_exponent, 0.5, 4.0);
+    require_range("unloading_growth", unloading_growth, 0.0, 1.0e4);
+    require_range("plate_yield_stress", plate_yield_stress, 0.0, 1.0e12, "Pa");
   }
 };
 
@@ -76,6 +89,7 @@ struct ContactKinematics {
   double r_eff;      // equivalent radius r*, m
   double m_eff;      // equivalent mass m*, kg
   bool wall = false; // the first body is a wall
+  double load_cap = kHuge;  // largest loading-branch force (crushing), N
 };
 
 struct ContactForce {
@@ -109,20 +123,40 @@ class HystereticLaw {
     return k1 * delta;
   }
 
+  // Unloading stiffness at residual overlap delta0 (constant unless unloading_growth > 0).
+  PELLETDEM_INLINE double unloading_stiffness(double k2, double delta0, double r_eff) const {
+    return k2 * (1.0 + p_.unloading_growth * std::max(delta0, 0.0) / r_eff);
+  }
+
+  // Residual overlap that puts force f on the unloading line through delta:
+  // k2 (1 + a delta0) (delta - delta0) = f with a = unloading_growth / r*, solved for the
+  // root that tends to delta - f / k2 as a -> 0 (written so it does not cancel).
+  PELLETDEM_INLINE double residual_for(double delta, double f, double k2, double r_eff) const {
+    const double c = delta - f / k2;
+    if (p_.unloading_growth <= 0.0) return c;
+    const double a = p_.unloading_growth / r_eff;
+    const double b = 1.0 - a * delta;
+    // a x^2 + b x - c = 0 has one positive root (c >= 0 as f <= k1 delta <= k2 delta)
+    const double root = std::sqrt(std::max(b * b + 4.0 * a * c, 0.0));
+    return (b > 0.0) ? 2.0 * c / (b + root) : (root - b) / (2.0 * a);
+  }
+
   // Normal force of eq. 5; updates the residual overlap delta0 so the unloading line moves
   // with the history (Walton-Braun with Luding's adhesive branch).
   PELLETDEM_INLINE double normal_force(double delta, double& delta0, double r_eff, double adhesion_scale,
-                      bool wall = false) const {
+                      bool wall = false, double load_cap = kHuge) const {
     const double s = stiffness_scale(r_eff, wall);
     const double k1 = s * p_.k1, k2 = s * p_.k2, kc = s * p_.kc * adhesion_scale;
-    const double f_elastic = k2 * (delta - delta0);
-    const double f_load = loading_force(delta, k1, r_eff);
+    const double k2e = unloading_stiffness(k2, delta0, r_eff);
+    const double f_elastic = k2e * (delta - delta0);
+    const double f_load = std::min(loading_force(delta, k1, r_eff), load_cap);
     if (f_elastic >= f_load) {
-      delta0 = delta - f_load / k2;
+      delta0 = residual_for(delta, f_load, k2, r_eff);
       return f_load;
     }
     if (f_elastic <= -kc * delta) {
-      delta0 = delta * (1.0 + kc / k2);
+      // k2 of the step before: adhesion (kc << k2) moves delta0 too little to matter
+      delta0 = delta * (1.0 + kc / k2e);
       return -kc * delta;
     }
     return f_elastic;
@@ -131,7 +165,7 @@ class HystereticLaw {
   PELLETDEM_INLINE ContactForce evaluate(const ContactKinematics& c, ContactHistory& h, double dt, double mu,
                         double adhesion_scale) const {
     const double s = stiffness_scale(c.r_eff, c.wall);
-    double fn = normal_force(c.delta, h.delta0, c.r_eff, adhesion_scale, c.wall);
+    double fn = normal_force(c.delta, h.delta0, c.r_eff, adhesion_scale, c.wall, c.load_cap);
     if (p_.normal_damping_ratio > 0.0)
       fn -= p_.normal_damping_ratio * 2.0 * std::sqrt(c.m_eff * s * p_.k2) * c.vn;
     const double kt = s * p_.kt_ratio * p_.k1;
@@ -157,7 +191,7 @@ class HystereticLaw {
   double stored_energy(double delta, const ContactHistory& h, double r_eff,
                        bool wall = false) const {
     const double s = stiffness_scale(r_eff, wall);
-    const double k2 = s * p_.k2;
+    const double k2 = unloading_stiffness(s * p_.k2, h.delta0, r_eff);
     const double f = k2 * (delta - h.delta0);
     double e = (f > 0.0) ? 0.5 * f * f / k2 : 0.0;
     const double kt = s * p_.kt_ratio * p_.k1;

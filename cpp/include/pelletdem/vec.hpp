@@ -11,6 +11,7 @@ using Vec3 = Eigen::Vector3d;
 using Index = std::uint32_t;
 
 inline constexpr double kPi = 3.14159265358979323846;
+inline constexpr double kHuge = 1.0e300;  // 'no limit' for forces, N
 
 // The per-contact functions must fold into the pair loop; GCC otherwise keeps the law's
 // evaluate() as a call, a quarter of the step's time.

@@ -44,6 +44,8 @@ struct Wall {
   double moved_since_build = 0.0;
   double travel = 0.0;  // displacement along the normal since creation, m (> 0 into the particles)
   bool load_wall = false;  // counts in the world's load marker
+  // Contacts with this wall obey the contact law's plate_yield_stress (the diametral plates).
+  bool crushable = false;
 
   std::vector<WallContact> contacts;  // candidates within r + skin, sorted by particle
 
