@@ -672,7 +672,8 @@ def _residual(data: Dataset, z: np.ndarray, n_params: int, alpha: float) -> Resi
               "mc [%]": {c.label: c.mc for c in conds}}
     return describe(z, parts=[o.part if o.part != "scalar" else o.quantity for o in data.observations],
                     conditions=[o.condition.label for o in data.observations],
-                    curves={k: np.array(v) for k, v in curves.items()}, levels=levels, n_params=n_params,
+                    curves={k: np.array(v) for k, v in curves.items()}, levels=levels,
+                    groups={"material": {c.label: c.material for c in conds}}, n_params=n_params,
                     alpha=alpha)
 
 

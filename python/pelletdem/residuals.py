@@ -11,7 +11,8 @@ independent with unit variance; three tests look for what noise cannot do:
   means the model misses a shape, not a level; the curves' run counts are pooled into one
   normal statistic; the pooled lag-1 autocorrelation is reported beside it;
 * trends across conditions: the mean z of each condition regressed on compaction pressure
-  and on moisture content (when there are at least three conditions and two levels).
+  and on moisture content (when there are at least three conditions and two levels), and a
+  one-way ANOVA of the conditions' mean z between materials.
 
 The residual is called structured when any test's p-value falls below ``alpha`` divided by
 the number of tests run (Bonferroni).
@@ -67,7 +68,10 @@ class ResidualSummary:
             out.append(f"runs test along the curves: z = {self.runs_z:.2f} (p = {self.p_runs:.2g}); "
                        f"lag-1 autocorrelation {self.autocorr:.2f}")
         for var, (slope, p) in self.trends.items():
-            out.append(f"trend of mean z with {var}: {slope:+.3g} per unit (p = {p:.2g})")
+            if var.startswith("group "):
+                out.append(f"mean z differs between {var[6:]}s: F = {slope:.3g} (p = {p:.2g})")
+            else:
+                out.append(f"trend of mean z with {var}: {slope:+.3g} per unit (p = {p:.2g})")
         for part, (n, m, r) in self.by_part.items():
             out.append(f"  {part:>16}: {n:3d} points, mean z {m:+.2f}, rms z {r:.2f}")
         out.append("structured: " + ("yes (" + "; ".join(self.reasons) + ")" if self.structured else "no, "
@@ -103,14 +107,18 @@ def _group_stats(z: np.ndarray, labels: Sequence[str]) -> Dict[str, tuple]:
 
 
 def describe(z, *, parts: Sequence[str], conditions: Sequence[str], curves: Mapping[str, np.ndarray],
-             levels: Optional[Mapping[str, Mapping[str, float]]] = None, n_params: int = 0,
+             levels: Optional[Mapping[str, Mapping[str, float]]] = None,
+             groups: Optional[Mapping[str, Mapping[str, str]]] = None, n_params: int = 0,
              alpha: float = DEFAULT_ALPHA) -> ResidualSummary:
     """Summarise residual z-scores and test them for structure.
 
     ``z``: one z-score per observation; ``parts`` and ``conditions``: a label per observation
     (part of the curve, condition); ``curves``: curve name -> indices of its observations in
     the order of their x; ``levels``: variable (e.g. 'sigma_z [MPa]', 'mc [%]') -> condition
-    label -> value, for the trend tests; ``n_params``: fitted parameters (chi-square dof).
+    label -> value, for the trend tests; ``groups``: categorical variable (e.g. 'material') ->
+    condition label -> category, for a one-way ANOVA of the conditions' mean z between
+    categories (reported in ``trends`` as (F statistic, p)); ``n_params``: fitted parameters
+    (chi-square dof).
     """
     z = np.asarray(z, float)
     if z.ndim != 1 or len(z) != len(parts) or len(z) != len(conditions):
@@ -160,6 +168,19 @@ def describe(z, *, parts: Sequence[str], conditions: Sequence[str], curves: Mapp
         p = float(res.pvalue) if math.isfinite(res.pvalue) else 1.0
         trends[var] = (float(res.slope), p)
         tests[f"trend with {var}"] = p
+
+    for var, cats in (groups or {}).items():
+        by_cat: Dict[str, List[float]] = {}
+        for c, (_, m, _) in by_cond.items():
+            if c in cats:
+                by_cat.setdefault(cats[c], []).append(m)
+        if len(by_cat) < 2 or sum(len(v) for v in by_cat.values()) < len(by_cat) + 2:
+            continue
+        spread = [v for v in by_cat.values() if len(v) >= 1]
+        res = stats.f_oneway(*spread)
+        p = float(res.pvalue) if math.isfinite(res.pvalue) else 1.0
+        trends["group " + var] = (float(res.statistic), p)
+        tests[f"differences between {var}s"] = p
 
     limit = alpha / len(tests)
     reasons = [f"{name} p = {p:.2g} < {limit:.2g}" for name, p in tests.items() if p < limit]
