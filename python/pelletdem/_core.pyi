@@ -1,0 +1,396 @@
+"""pelletdem's C++ engine: DEM with the linear hysteretic adhesive contact law and parallel bonds.
+
+Use the Python layer (``pelletdem``: ``World``, ``ContactLaw``, ``BondLaw``) rather than this
+module directly. SI units throughout (m, s, kg with the density scaling applied, N, Pa, J).
+
+Generated with ``pybind11-stubgen pelletdem._core`` and reviewed by hand: parameter names of
+positional-only arguments are ours (the bindings do not name them), numpy arrays are typed by
+dtype, dicts list their keys in the docstrings. ``tests/test_stubs.py`` checks that this file
+names every public attribute of the compiled module.
+"""
+from __future__ import annotations
+
+from typing import Any, Callable, ClassVar, Sequence, overload
+
+import numpy
+from numpy.typing import ArrayLike, NDArray
+
+_Vec3 = Sequence[float]
+_Float64Array = NDArray[numpy.float64]
+_IndexArray = NDArray[numpy.uint32]
+
+# --- errors -------------------------------------------------------------------------------
+
+class ParameterError(ValueError):
+    """A bad input; the message names the parameter and its allowed range."""
+
+class SimulationError(RuntimeError):
+    """A run that went wrong (base of the three below)."""
+
+class ParticleEscapedError(SimulationError):
+    """A particle left the world's box."""
+
+class OverlapError(SimulationError):
+    """An overlap beyond ``max_overlap_ratio`` of a radius."""
+
+class NonFiniteError(SimulationError):
+    """A position, velocity or force became NaN or infinite."""
+
+# --- parameters ---------------------------------------------------------------------------
+
+class ContactLawParams:
+    """The contact law of eq. 5-11 (Table 4 defaults).
+
+    k1, k2, kc: loading, unloading and adhesion stiffness, N/m (1e5, 4e5, 600).
+    kt_ratio: tangential stiffness over k1 (1). mu, mu_wall: friction coefficients (0.5, 0.15).
+    rolling: m_r of eq. 11 (0.01). wall_adhesion: walls adhere too (False).
+    wall_stiffness_factor: wall stiffness over a pair's (2). normal_damping_ratio: viscous normal
+    damping, fraction of critical (0). scale_with_radius, r_ref (m): stiffness x 2 r*/r_ref per
+    pair. hardening, hardening_exponent: loading branch k1 (1 + hardening (delta/r*)^exponent).
+    unloading_growth: k2 (1 + unloading_growth delta0/r*), delta0 the residual overlap (0).
+    plate_yield_stress: on crushable walls the loading force is capped at it times pi r^2, Pa
+    (0: off). The last four are optional effects the paper's law lacks (0 switches them off).
+    """
+
+    k1: float
+    k2: float
+    kc: float
+    kt_ratio: float
+    mu: float
+    mu_wall: float
+    rolling: float
+    wall_adhesion: bool
+    wall_stiffness_factor: float
+    normal_damping_ratio: float
+    scale_with_radius: bool
+    r_ref: float
+    hardening: float
+    hardening_exponent: float
+    unloading_growth: float
+    plate_yield_stress: float
+    def __init__(self) -> None: ...
+    def restitution(self) -> float:
+        """e = sqrt(k1 / k2) (eq. 8), dimensionless."""
+    def validate(self) -> None:
+        """Raise ParameterError naming the first field out of its range."""
+
+class BondParams:
+    """Parallel-bond parameters (eq. 12-15).
+
+    radius: r_b, m (2e-5). youngs_modulus: E_b, Pa (120e6; k_n^b = E_b / (r_i + r_j)).
+    kt_ratio: k_t^b / k_n^b (1). sigma_c, tau_c: tensile and shear strength, Pa (36e6).
+    gap_tolerance: pairs whose surfaces are closer than this are bonded too, m (0).
+    Optional effects the paper's bonds lack (each off at its default):
+    weibull_modulus (-; 0: one strength for all) and strength_seed (an integer, as a float):
+    each bond's sigma_c, tau_c times a Weibull variate of mean 1. softening (-; 0: brittle):
+    past its strength a bond's capacity falls to zero at (1 + softening) times its peak strain.
+    overlap_radius_gain (-): r_b (1 + gain delta0 / r*) per bond. moisture_content,
+    moisture_reference (%), moisture_coefficient (1/%; 0: off): E_b and the strengths times
+    exp(-coefficient (content - reference)).
+    """
+
+    radius: float
+    youngs_modulus: float
+    kt_ratio: float
+    sigma_c: float
+    tau_c: float
+    gap_tolerance: float
+    weibull_modulus: float
+    strength_seed: float
+    softening: float
+    overlap_radius_gain: float
+    moisture_content: float
+    moisture_reference: float
+    moisture_coefficient: float
+    def __init__(self) -> None: ...
+    def validate(self) -> None:
+        """Raise ParameterError naming the first field out of its range."""
+
+class WorldParams:
+    """Construction parameters of a World.
+
+    dt: time step, s. gravity: physical gravity, m/s^2 (divided by density_scale in the
+    engine). density: particle solid density, kg/m^3. density_scale: mass factor.
+    skin: Verlet skin, m (0: a tenth of the largest radius). box_lo, box_hi: the domain
+    corners, m (leaving it is an error). threads: OpenMP threads. max_overlap_ratio: guard on
+    overlap / radius. sample_interval: steps between time-series samples. contact: the law.
+    """
+
+    dt: float
+    gravity: list[float]
+    density: float
+    density_scale: float
+    skin: float
+    box_lo: list[float]
+    box_hi: list[float]
+    threads: int
+    max_overlap_ratio: float
+    sample_interval: int
+    contact: ContactLawParams
+    def __init__(self) -> None: ...
+
+# --- stop conditions ----------------------------------------------------------------------
+
+class StopKind:
+    """What a StopCondition tests (its value's unit in brackets).
+
+    Time [s], Steps [steps in this call], KineticEnergyBelow [J, scaled mass],
+    InternalKineticEnergyBelow [J, about the centre of mass], WallForceAbove and
+    WallForceBelow [N, compressive normal force on the wall], WallTravelAbove [m, along the
+    wall's normal], LoadMarkerAbove [m, summed travel of the load walls].
+    """
+
+    Time: ClassVar[StopKind]
+    Steps: ClassVar[StopKind]
+    KineticEnergyBelow: ClassVar[StopKind]
+    InternalKineticEnergyBelow: ClassVar[StopKind]
+    WallForceAbove: ClassVar[StopKind]
+    WallForceBelow: ClassVar[StopKind]
+    WallTravelAbove: ClassVar[StopKind]
+    LoadMarkerAbove: ClassVar[StopKind]
+    __members__: ClassVar[dict[str, StopKind]]
+    def __init__(self, value: int) -> None: ...
+    @overload
+    def __eq__(self, other: StopKind) -> bool: ...
+    @overload
+    def __eq__(self, other: object) -> bool: ...
+    @overload
+    def __ne__(self, other: StopKind) -> bool: ...
+    @overload
+    def __ne__(self, other: object) -> bool: ...
+    def __hash__(self) -> int: ...
+    def __index__(self) -> int: ...
+    def __int__(self) -> int: ...
+    def __getstate__(self) -> int: ...
+    def __setstate__(self, state: int) -> None: ...
+    @property
+    def name(self) -> str: ...
+    @property
+    def value(self) -> int: ...
+
+class StopCondition:
+    """One stop condition of ``World.run_until``: ``kind`` against ``value`` (unit by kind),
+    on wall index ``wall`` for the wall conditions (-1 otherwise), tested every
+    ``check_interval`` steps."""
+
+    def __init__(self, kind: StopKind, value: float, wall: int = -1, check_interval: int = 1) -> None: ...
+    @property
+    def kind(self) -> StopKind: ...
+    @property
+    def value(self) -> float: ...
+    @property
+    def wall(self) -> int: ...
+    @property
+    def check_interval(self) -> int: ...
+
+# --- the world ----------------------------------------------------------------------------
+
+class World:
+    """Particles, analytic walls (planes, the inside of z-cylinders) and bonds, stepped in C++.
+
+    Particle arrays (x, v, w, f, t, r, m) are read-only zero-copy views; while one is alive the
+    world refuses to add particles.
+    """
+
+    def __init__(self, params: WorldParams) -> None: ...
+    def clone(self) -> World:
+        """Deep copy of the whole state (particles, contact history, walls, bonds)."""
+
+    # state
+    def get_state(self) -> dict[str, Any]:
+        """The whole state as a dict of numpy arrays (see pelletdem.checkpoint)."""
+    def set_state(self, state: dict[str, Any], /) -> None:
+        """Restore a state from get_state() into a world built with the same parameters."""
+
+    # set-up
+    def add_particles(self, positions: ArrayLike, radii: ArrayLike) -> None:
+        """Add particles at ``positions`` ((N, 3), m) with ``radii`` ((N,), m)."""
+    def add_plane(self, name: str, point: _Vec3, normal: _Vec3) -> int:
+        """A plane wall through ``point`` (m) facing the particles along ``normal``; returns its index."""
+    def add_cylinder(self, name: str, axis_point: _Vec3, radius: float) -> int:
+        """The inside of a z-aligned cylinder through ``axis_point`` (m) of ``radius`` (m); returns its index."""
+    def set_positions(self, positions: ArrayLike, /) -> None:
+        """Replace all positions, (N, 3) m."""
+    def set_velocities(self, velocities: ArrayLike, angular_velocities: ArrayLike, /) -> None:
+        """Replace all velocities (N, 3) m/s and angular velocities (N, 3) rad/s."""
+    def set_contact_params(self, params: ContactLawParams, /) -> None: ...
+    def set_max_overlap_ratio(self, ratio: float, /) -> None:
+        """Guard on overlap / radius beyond which a run raises OverlapError."""
+    def set_sample_interval(self, steps: int, /) -> None:
+        """Steps between samples of the time series."""
+    def set_load_walls(self, walls: Sequence[int], /) -> None:
+        """Walls whose travel sums into ``load_marker`` (the diametral test's plates)."""
+    def set_adhesion_ramp(self, t_start: float, duration: float) -> None:
+        """Scale the adhesion stiffness kc linearly from 1 to 0 between t_start and t_start + duration, s."""
+
+    # walls
+    @property
+    def wall_count(self) -> int: ...
+    def wall_name(self, wall: int, /) -> str: ...
+    def wall_kind(self, wall: int, /) -> str:
+        """'plane' or 'cylinder'."""
+    def set_wall_velocity(self, wall: int, velocity: _Vec3, /) -> None:
+        """Prescribed wall velocity, m/s (switches a servo off)."""
+    def set_wall_radius_rate(self, wall: int, rate: float, /) -> None:
+        """Growth rate of a cylinder's radius, m/s."""
+    def set_wall_servo(self, wall: int, force: float, gain: float, max_speed: float, /) -> None:
+        """Drive a plane to the compressive force ``force`` (N): speed = gain (force - F_n),
+        gain in m/(s N), clipped to ``max_speed`` (m/s)."""
+    def set_wall_active(self, wall: int, active: bool, /) -> None: ...
+    def set_wall_crushable(self, wall: int, crushable: bool, /) -> None:
+        """Contacts with this wall obey the contact law's plate_yield_stress (crushing under
+        the diametral test's plates)."""
+    def set_wall_point(self, wall: int, point: _Vec3, /) -> None:
+        """Move a wall's reference point to ``point``, m."""
+    def set_wall_radius(self, wall: int, radius: float, /) -> None:
+        """A cylinder's radius, m."""
+    def wall_state(self, wall: int, /) -> dict[str, Any]:
+        """name, kind, point (m), normal, radius (m), velocity (m/s), radius_rate (m/s),
+        force (N), torque (N m), normal_force (N, compressive > 0), travel (m), active,
+        max_overlap_ratio, contacts (count)."""
+
+    # running
+    def run_until(self, conditions: Sequence[StopCondition], max_steps: int,
+                  progress: Callable[[int], object] | None = None,
+                  between: Callable[[int], object] | None = None) -> tuple[int, int]:
+        """Run until a condition holds or ``max_steps`` steps have run, in chunks of ~0.1 s
+        with the GIL released; ``progress(steps_done)`` is called after every chunk,
+        ``between(steps_done)`` only when the run goes on after it (a safe point for a
+        checkpoint). Returns (index of the condition that fired or -1, steps run)."""
+    def step(self) -> None: ...
+    @property
+    def time(self) -> float:
+        """Simulated time, s."""
+    @property
+    def step_count(self) -> int: ...
+    @property
+    def dt(self) -> float:
+        """Time step, s."""
+    @dt.setter
+    def dt(self, value: float) -> None: ...
+    @property
+    def threads(self) -> int: ...
+    @threads.setter
+    def threads(self, value: int) -> None: ...
+    @property
+    def gravity(self) -> list[float]:
+        """Physical gravity, m/s^2 (the engine divides it by density_scale)."""
+    @gravity.setter
+    def gravity(self, value: _Vec3) -> None: ...
+    @property
+    def density(self) -> float:
+        """Particle solid density, kg/m^3."""
+    @property
+    def density_scale(self) -> float: ...
+    @property
+    def contact_params(self) -> ContactLawParams: ...
+    @property
+    def sample_interval(self) -> int:
+        """Steps between time-series samples."""
+    @property
+    def max_overlap_ratio(self) -> float:
+        """The overlap guard: delta / r beyond it stops a run."""
+    @property
+    def adhesion_scale(self) -> float:
+        """Current factor on kc (1 before an adhesion ramp, 0 after it)."""
+
+    # measurements
+    @property
+    def n(self) -> int:
+        """Number of particles."""
+    def kinetic_energy(self) -> float:
+        """Translational and rotational kinetic energy, J (scaled mass)."""
+    def internal_kinetic_energy(self) -> float:
+        """Kinetic energy in the centre-of-mass frame, J (scaled mass)."""
+    def potential_energy(self) -> float:
+        """Elastic energy in contacts and bonds plus (scaled) gravity, J."""
+    def mean_velocity(self) -> list[float]:
+        """Mass-weighted mean velocity, m/s."""
+    def remove_mean_velocity(self) -> None: ...
+    def coordination_number(self) -> float:
+        """Mean number of particle-particle contacts per particle, 2 contacts / N."""
+    @property
+    def contact_count(self) -> int: ...
+    @property
+    def max_overlap_ratio_seen(self) -> float:
+        """Largest overlap / radius since the last reset (particles and walls)."""
+    def reset_max_overlap_seen(self) -> None: ...
+    @property
+    def load_marker(self) -> float:
+        """Summed travel of the load walls, m."""
+    def critical_time_step(self) -> float:
+        """Stability limit of the stiffest contact on the lightest particle, s."""
+    @property
+    def rebuild_count(self) -> int:
+        """Neighbour-list rebuilds so far."""
+    @property
+    def pair_list_size(self) -> int: ...
+    def contacts(self) -> dict[str, NDArray[Any]]:
+        """Pairs in contact now: i, j (uint32), overlap (m), fn (normal force, N)."""
+
+    # particle views (read-only, no copy)
+    @property
+    def x(self) -> _Float64Array:
+        """Positions, (N, 3) m."""
+    @property
+    def v(self) -> _Float64Array:
+        """Velocities, (N, 3) m/s."""
+    @property
+    def w(self) -> _Float64Array:
+        """Angular velocities, (N, 3) rad/s."""
+    @property
+    def f(self) -> _Float64Array:
+        """Forces of the last step, (N, 3) N."""
+    @property
+    def t(self) -> _Float64Array:
+        """Torques of the last step, (N, 3) N m."""
+    @property
+    def r(self) -> _Float64Array:
+        """Radii, (N,) m."""
+    @property
+    def m(self) -> _Float64Array:
+        """Masses (density-scaled), (N,) kg."""
+
+    # time series
+    def samples(self) -> dict[str, _Float64Array]:
+        """time (s), kinetic_energy (J), coordination_number, max_overlap_ratio,
+        load_marker (m), n_contacts, n_bonds_intact, n_bonds_broken."""
+    def wall_samples(self, wall: int, /) -> dict[str, _Float64Array]:
+        """time (s), force ((n, 3) N), normal_force (N), point ((n, 3) m), radius (m), travel (m)."""
+    def clear_samples(self) -> None: ...
+    def record_sample(self) -> None:
+        """Record one sample now (outside the sampling interval)."""
+
+    # bonds
+    def create_bonds(self, params: BondParams, /) -> int:
+        """Bond every pair whose surfaces are closer than params.gap_tolerance, stress-free
+        now; returns the number of bonds created."""
+    @property
+    def bond_count(self) -> int:
+        """Bonds created so far, intact or broken."""
+    def intact_bond_count(self) -> int: ...
+    def bonds(self) -> dict[str, NDArray[Any]]:
+        """Every bond: i, j (uint32), mode (uint8: 0 intact, 1 broken in tension, 2 in shear),
+        fn (N), ft ((n, 3) N), mn (N m), mt ((n, 3) N m), radius (m), kn, kt (N/m^3),
+        sigma_c, tau_c, sigma_max, tau_max (Pa, eq. 14), damage (0 intact .. 1 gone, softening)."""
+    def set_bond_property(self, name: str, values: ArrayLike, /) -> None:
+        """Set one of radius (m), kn, kt (N/m^3), sigma_c, tau_c (Pa) per bond (one value per bond)."""
+    def broken_bonds(self) -> dict[str, NDArray[Any]]:
+        """Bonds broken so far, in order: time (s), step, i, j, position ((n, 3) m, bond
+        centre), mode (1 tension, 2 shear), sigma, tau (Pa at breakage), load_marker (m)."""
+
+# --- free functions -----------------------------------------------------------------------
+
+def truncated_normal_radii(n: int, mean: float, sd: float, r_min: float, r_max: float, seed: int) -> list[float]:
+    """Radii (m) from a normal distribution truncated to [r_min, r_max], seeded."""
+
+def random_pack_cylinder(radii: ArrayLike, cx: float, cy: float, radius: float, z_lo: float, z_hi: float,
+                         seed: int, max_attempts: int = 100000) -> tuple[_Float64Array, _Float64Array]:
+    """Random non-overlapping placement in a z-aligned cylinder (axis at cx, cy; radius, z_lo,
+    z_hi in m); returns (positions (N, 3) m, radii (N,) m) sorted along z."""
+
+def brute_force_pairs(positions: ArrayLike, radii: ArrayLike, skin: float, /) -> tuple[_IndexArray, _IndexArray]:
+    """Reference O(N^2) pair search (for tests): pairs closer than r_i + r_j + skin (m)."""
+
+def neighbor_pairs(world: World, /) -> tuple[_IndexArray, _IndexArray]:
+    """The world's current neighbour pairs (i < j) as two arrays."""

@@ -1,0 +1,66 @@
+"""The documentation: the parameter reference lists every parameter, and the site builds.
+
+`bash scripts/docs.sh` builds the site with `mkdocs build --strict`; the build test here runs
+the same build (into a temporary directory) when MkDocs and mkdocstrings are installed (the
+`docs` extra) and is skipped otherwise.
+"""
+from __future__ import annotations
+
+import dataclasses
+import importlib.util
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from pelletdem.engine import BondLaw, ContactLaw
+from pelletdem.presets import Preset
+
+ROOT = Path(__file__).resolve().parents[1]
+DOCS = ROOT / "docs"
+
+
+def _documented_names(section: str) -> set[str]:
+    """Field names in the first column of the tables under the `## ...` heading `section`."""
+    text = (DOCS / "parameters.md").read_text()
+    m = re.search(rf"^## {re.escape(section)}.*?$(.*?)(?=^## |\Z)", text, re.M | re.S)
+    assert m, f"parameters.md has no section {section!r}"
+    return set(re.findall(r"^\| `(\w+)`", m.group(1), re.M))
+
+
+@pytest.mark.parametrize("cls, section", [(ContactLaw, "Contact law"), (BondLaw, "Bonds"),
+                                          (Preset, "Run sizes and stage settings")],
+                         ids=["ContactLaw", "BondLaw", "Preset"])
+def test_parameter_reference_lists_every_field(cls, section):
+    fields = {f.name for f in dataclasses.fields(cls)}
+    documented = _documented_names(section)
+    assert sorted(fields - documented) == [], f"{cls.__name__} fields missing from docs/parameters.md"
+    assert sorted(documented - fields - _engine_only(cls)) == [], \
+        f"docs/parameters.md lists {cls.__name__} fields that do not exist"
+
+
+def _engine_only(cls) -> set[str]:
+    """Fields of the C++ parameter struct not (yet) in the Python dataclass: documented too."""
+    from pelletdem import _core
+
+    core = {ContactLaw: _core.ContactLawParams, BondLaw: _core.BondParams}.get(cls)
+    return {n for n in dir(core) if not n.startswith("_")} if core else set()
+
+
+def test_every_page_in_the_nav_exists():
+    text = (ROOT / "mkdocs.yml").read_text()
+    for page in re.findall(r":\s*(\S+\.md)\s*$", text, re.M):
+        assert (DOCS / page).is_file(), page
+
+
+def test_docs_build_strict(tmp_path):
+    for mod in ("mkdocs", "mkdocstrings", "mkdocstrings_handlers.python"):
+        if importlib.util.find_spec(mod.split(".")[0]) is None:
+            pytest.skip(f"{mod} is not installed (pip install '.[docs]')")
+    out = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "-q", "-f", str(ROOT / "mkdocs.yml"),
+                          "-d", str(tmp_path / "site")], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stdout + out.stderr
+    assert (tmp_path / "site" / "api" / "engine" / "index.html").is_file()
+    assert (tmp_path / "site" / "parameters" / "index.html").is_file()
