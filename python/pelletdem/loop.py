@@ -7,7 +7,10 @@ The procedure (:func:`close_loop`):
    sigma_c, per material or shared) is fitted to the *fit* observations by Levenberg-Marquardt
    on z-scores, in log space, with forward-difference Jacobians (every simulation goes through
    the calibration cache, so repeated points cost nothing).
-2. **Residual.** :func:`pelletdem.residuals.describe`: per point, per part of the curve (toe,
+2. **Residual.** The model's own scatter is measured first (``model_jitter``: the base
+   parameters raised and lowered by 0.1%; a DEM pellet then breaks its bonds in another order)
+   and added to the replicate SDs in quadrature, so that a chaotic model's jitter is not taken
+   for a missing effect. :func:`pelletdem.residuals.describe`: per point, per part of the curve (toe,
    rise, peak, post-peak; compaction below and above dh/h0 = 0.75), per condition, and tests
    for structure (chi-square against the replicate SD, runs along the curves, trends with
    pressure and moisture). A residual consistent with noise ends the loop: nothing is added.
@@ -20,7 +23,9 @@ The procedure (:func:`close_loop`):
    explain to first order. An effect whose best strength would be negative while it only
    works one way explains nothing. Candidates are ranked by that fraction.
 4. **Refit and choose.** The best ``refit_top`` candidates (explaining at least
-   ``min_explained``) are refitted with their parameter free. Each is scored on the
+   ``min_explained``) are refitted with their parameter free, starting from the best point of
+   a profile over the effect's strength (``profile_points`` values across its bounds, each
+   with the base parameters moved by one Gauss-Newton step). Each is scored on the
    *held-out* observations (other pressures, moisture contents or replicates, never used in
    a fit) and on the fit data with a penalty of ln(n) per added parameter (BIC). A candidate
    is accepted when its penalised fit error falls, its held-out chi-square falls by at least
@@ -176,6 +181,15 @@ class Dataset:
     def sds(self) -> np.ndarray:
         """Effective SDs used in z-scores."""
         return np.array([o.effective_sd for o in self.observations])
+
+    def with_model_sd(self, model_sd: Sequence[float]) -> "Dataset":
+        """A copy whose SDs also carry the model's own scatter: sd = sqrt(sd^2 + model_sd^2)
+        per observation (same unit)."""
+        model_sd = np.asarray(model_sd, float)
+        if model_sd.shape != (len(self),) or not np.all(np.isfinite(model_sd)) or np.any(model_sd < 0):
+            raise ValueError("model_sd must be one finite value >= 0 per observation")
+        return Dataset([dataclasses.replace(o, sd=float(math.hypot(o.sd, m)))
+                        for o, m in zip(self.observations, model_sd)], self.name)
 
     def subset(self, keep: Callable[[Observation], bool], name: Optional[str] = None) -> "Dataset":
         """The observations for which ``keep(observation)`` is true."""
@@ -691,12 +705,60 @@ def _orth(J: np.ndarray, v: np.ndarray) -> np.ndarray:
     return v - J @ coef
 
 
+def _model_jitter(sim: Simulator, data: Dataset, params: Mapping[str, float], names: Sequence[str],
+                  rel: float = 1e-3) -> np.ndarray:
+    """The model's own scatter per observation (its unit): predictions at the base parameters
+    all raised and all lowered by ``rel``. A smooth model changes by ~rel there; a DEM pellet
+    breaks its bonds in another order and its curve jitters by as much as a new packing would.
+    Half the squared difference, pooled over each curve (condition and quantity), estimates
+    the jitter's variance."""
+    up = {**params, **{k: params[k] * (1 + rel) for k in names}}
+    down = {**params, **{k: params[k] * (1 - rel) for k in names}}
+    zu, zd = _zscores_many(sim, [up, down], data)
+    d = (zu - zd) * data.sds
+    d = np.where(np.isfinite(d), d, 0.0)
+    out = np.zeros(len(data))
+    groups: Dict[tuple, List[int]] = {}
+    for i, o in enumerate(data.observations):
+        groups.setdefault((o.condition, o.quantity), []).append(i)
+    for idx in groups.values():
+        out[idx] = math.sqrt(float(np.mean(d[idx] ** 2)) / 2.0)
+    return out
+
+
+def _profile_start(sim: Simulator, data: Dataset, base: FitState, eff: Effect,
+                   base_bounds: Mapping[str, Sequence[float]], linear: float, points: int) -> Dict[str, float]:
+    """Start of a refit: the effect's strength on a grid over its bounds (plus the first-order
+    estimate), each with the base parameters moved by one Gauss-Newton step on the baseline's
+    Jacobian; the best of all these points. A DEM objective is too rough for a local fit to
+    find a strength from far away."""
+    pars = _pars(base_bounds)
+    grid = list(np.geomspace(eff.lo, eff.hi, points) if eff.log else np.linspace(eff.lo, eff.hi, points))
+    grid.append(min(max(linear, eff.lo * (1.01 if eff.log else 1.0)), eff.hi))
+    first = [{**base.params, **eff.settings(v)} for v in grid]
+    zs = _zscores_many(sim, first, data)
+    second = []
+    for pset, z in zip(first, zs):
+        if not np.all(np.isfinite(z)) or base.jacobian.size == 0:
+            continue
+        du, *_ = np.linalg.lstsq(base.jacobian, -z, rcond=None)
+        q = dict(pset)
+        for p, d in zip(pars, np.clip(du, -0.7, 0.7)):
+            q[p.name] = p.to_v(p.clip_u(p.to_u(pset[p.name]) + d))
+        second.append(q)
+    tried = first + second
+    chis = [_chi2(z) for z in zs + _zscores_many(sim, second, data)]
+    best = tried[int(np.argmin(chis))]
+    return {k: best[k] for k in list(base_bounds) + [eff.param]}
+
+
 def close_loop(sim: Simulator, data: Dataset, base_bounds: Mapping[str, Sequence[float]],
                start: Mapping[str, float], *, held_out: Optional[Callable[[Condition], bool]] = None,
                heldout_data: Optional[Dataset] = None, library: Optional[Mapping[str, Effect]] = None,
                fixed: Optional[Mapping[str, float]] = None, refit_top: int = 3, min_explained: float = 0.05,
                min_heldout_gain: float = 0.3, clear_margin: float = 0.1, alpha: float = DEFAULT_ALPHA,
-               max_iter: int = 6, refit_iter: int = 5, fd_step: float = 0.1,
+               max_iter: int = 6, refit_iter: int = 5, fd_step: float = 0.1, profile_points: int = 5,
+               model_jitter: bool = True,
                log: Optional[Callable[[str], None]] = None) -> LoopResult:
     """Fit the baseline, describe its residual, rank the candidate effects, refit the best,
     choose by held-out error with a parameter penalty, and return a :class:`LoopResult`.
@@ -716,7 +778,7 @@ def close_loop(sim: Simulator, data: Dataset, base_bounds: Mapping[str, Sequence
             log(s)
 
     for name, v, lo, hi in (("refit_top", refit_top, 1, 20), ("max_iter", max_iter, 0, 50),
-                            ("refit_iter", refit_iter, 0, 50)):
+                            ("refit_iter", refit_iter, 0, 50), ("profile_points", profile_points, 2, 50)):
         if not isinstance(v, int) or not lo <= v <= hi:
             raise ValueError(f"{name} = {v!r} is out of range: allowed {lo} <= {name} <= {hi}")
     for name, v in (("min_explained", min_explained), ("min_heldout_gain", min_heldout_gain),
@@ -737,6 +799,19 @@ def close_loop(sim: Simulator, data: Dataset, base_bounds: Mapping[str, Sequence
     say(f"baseline fit of {list(base_bounds)} to {n_fit} points ({len(fit_data.conditions)} conditions)")
     base = fit_model(sim, fit_data, base_bounds, start, fixed, max_iter=max_iter, fd_step=fd_step, log=say)
     k0 = len(base.free)
+    if model_jitter:
+        both = Dataset(fit_data.observations + heldout_data.observations, data.name)
+        jit = _model_jitter(sim, both, base.params, list(base_bounds))
+        if np.any(jit > 0):
+            both = both.with_model_sd(jit)
+            old_sd = fit_data.sds
+            fit_data = Dataset(both.observations[:n_fit], fit_data.name)
+            heldout_data = Dataset(both.observations[n_fit:], heldout_data.name)
+            scale = old_sd / fit_data.sds
+            base = dataclasses.replace(base, z=base.z * scale, jacobian=base.jacobian * scale[:, None],
+                                       chi2=float(np.sum((base.z * scale) ** 2)))
+            say(f"model jitter (base parameters +-0.1%): rms {np.sqrt(np.mean((jit / np.maximum(np.abs(both.values), 1e-300)) ** 2)):.3f} "
+                "of the measured values, added to the SDs in quadrature")
     res0 = _residual(fit_data, base.z, k0, alpha)
     for s in res0.lines():
         say("  " + s)
@@ -786,16 +861,13 @@ def close_loop(sim: Simulator, data: Dataset, base_bounds: Mapping[str, Sequence
         tried = [c for c in candidates if c.explained >= min_explained][:refit_top]
         for c in tried:
             eff = c.effect
-            x0 = min(max(c.linear_strength, eff.lo), eff.hi)
-            if eff.log:
-                x0 = min(max(x0, eff.lo * 1.01), eff.hi / 1.01)
             bounds = dict(base_bounds)
             bounds[eff.param] = (eff.lo, eff.hi)
-            st = {k: base.params[k] for k in base_bounds}
-            st[eff.param] = x0
+            st = _profile_start(sim, fit_data, base, eff, base_bounds, c.linear_strength, profile_points)
+            x0 = st[eff.param]
             fx = dict(fixed)
             fx.update({k: v for k, v in eff.settings(x0).items() if k != eff.param})
-            say(f"refit with {eff.name} from {eff.param} = {x0:.4g}")
+            say(f"refit with {eff.name} from {eff.param} = {x0:.4g} (best of a {profile_points}-point profile)")
             try:
                 c.fit = fit_model(sim, fit_data, bounds, st, fx, max_iter=refit_iter, fd_step=fd_step, log=say)
             except RuntimeError as e:
