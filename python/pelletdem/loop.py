@@ -881,7 +881,8 @@ def close_loop(sim: Simulator, data: Dataset, base_bounds: Mapping[str, Sequence
             if not c.bic < bic0:
                 c.why = f"penalised fit error not lower (BIC {c.bic:.1f} vs {bic0:.1f})"
             elif not gain >= min_heldout_gain:
-                c.why = f"held-out chi2 falls by {100 * gain:.0f}% only (need {100 * min_heldout_gain:.0f}%)"
+                c.why = (f"held-out chi2 changes by {-100 * gain:+.0f}% (needs to fall by "
+                         f"{100 * min_heldout_gain:.0f}%)")
             elif c.fit_residual.structured:
                 c.why = "the refitted residual is still structured (" + "; ".join(c.fit_residual.reasons) + ")"
             else:
