@@ -161,9 +161,12 @@ GRID = {"E_b": [20e6, 30e6, 45e6], "sigma_c": [6e6, 9e6]}
 
 def test_resumed_scan_runs_no_simulation_twice(tmp_path):
     tg = synthetic_targets(30e6, 9e6)
-    # a scan that dies after 2 of its 6 runs ...
-    with pytest.raises(RuntimeError, match="killed"):
-        C.scan(GRID, tg, cache_dir=tmp_path, executor="serial", runner=failing_after(2))
+    # a scan whose runner dies after 2 of its 6 runs completes, the other 4 reported failed
+    # (each tried twice) and not cached ...
+    res = C.scan(GRID, tg, cache_dir=tmp_path, executor="serial", runner=failing_after(2))
+    assert res.n_failed == 4 and res.n_retried == 4 and len(res.failures) == 4
+    assert (~res.runs["ok"]).sum() == 4
+    assert res.runs.loc[~res.runs["ok"], "error"].str.contains("worker killed").all()
     assert len(CALLS) == 2 and len(C.RunCache(tmp_path)) == 2
     # ... resumes: only the 4 missing runs are done
     res = C.scan(GRID, tg, cache_dir=tmp_path, executor="serial", runner=power_law_runner)
@@ -175,6 +178,96 @@ def test_resumed_scan_runs_no_simulation_twice(tmp_path):
     assert res.best == {"E_b": 30e6, "sigma_c": 9e6}
     assert res.points["loss"].min() == pytest.approx(0.0, abs=1e-9)
     assert len(res.runs) == 6 and res.runs["cached"].all()
+
+
+# --- failed points: retried once, then reported; the rest of the scan completes ---------------
+
+def failing_for(e_b):
+    """A runner that raises for every point with E_b == e_b (deterministic failure)."""
+    def run(spec):
+        if abs(spec.bond.youngs_modulus / e_b - 1) < 1e-9:  # a fit's log-space point is not exact
+            raise RuntimeError(f"cannot run E_b = {e_b}")
+        return power_law_runner(spec)
+    return run
+
+
+def failing_once():
+    """A runner whose first attempt at every point raises (a transient fault)."""
+    seen, lock = set(), threading.Lock()
+
+    def run(spec):
+        with lock:
+            first = spec.key not in seen
+            seen.add(spec.key)
+        if first:
+            raise OSError("transient: node lost")
+        return power_law_runner(spec)
+    return run
+
+
+def test_a_point_that_always_fails_is_retried_once_then_reported(tmp_path):
+    res = C.scan(GRID, synthetic_targets(30e6, 9e6), cache_dir=tmp_path, executor=ThreadPoolExecutor(2),
+                 runner=failing_for(45e6))
+    assert res.n_failed == 2 and res.n_retried == 2
+    bad = res.runs[~res.runs["ok"]]
+    assert sorted(bad["E_b"]) == [45e6, 45e6]
+    assert bad["error"].str.contains("failed 2 times").all()
+    assert bad["error"].str.contains("cannot run E_b = 45000000.0").all()
+    assert {f["attempts"] for f in res.failures} == {2}
+    # the other points ran, were scored and cached; failed points are not cached
+    assert res.runs["ok"].sum() == 4 and len(C.RunCache(tmp_path)) == 4
+    assert res.best == {"E_b": 30e6, "sigma_c": 9e6}
+    assert not res.points.loc[res.points["E_b"] == 45e6, "ok"].any()
+
+
+def test_a_point_that_fails_once_succeeds_on_its_retry():
+    res = C.scan(GRID, synthetic_targets(30e6, 9e6), executor=ThreadPoolExecutor(2), runner=failing_once())
+    assert res.n_retried == 6 and res.n_failed == 0
+    assert res.runs["ok"].all()
+    assert res.best == {"E_b": 30e6, "sigma_c": 9e6}
+
+
+def test_fit_reports_a_failed_point_and_goes_on():
+    tg = synthetic_targets(30e6, 9e6)
+    r = C.fit({"E_b": (1e6, 1e9, 120e6), "sigma_c": (1e5, 1e9, 36e6)}, tg, executor="serial",
+              runner=failing_for(120e6), tol=0.3)
+    assert r.n_failed >= 1 and r.n_retried >= r.n_failed
+    assert not r.history["ok"].iloc[0] and "failed 2 times" in r.history["error"].iloc[0]
+
+
+def dying_runner(spec, marker_dir=None):
+    """Kills its worker process (os._exit, like a segfault or the OOM killer) for the point
+    E_b = 45 MPa, sigma_c = 9 MPa: every time, or only the first time when `marker_dir` is
+    given (the marker file says it has died once already)."""
+    if spec.bond.youngs_modulus == 45e6 and spec.bond.sigma_c == 9e6:
+        marker = None if marker_dir is None else os.path.join(marker_dir, "died")
+        if marker is None or not os.path.exists(marker):
+            if marker is not None:
+                open(marker, "w").close()
+            os._exit(3)
+    return power_law_runner(spec)
+
+
+def test_a_worker_process_that_dies_is_retried_and_reported(tmp_path):
+    res = C.scan(GRID, synthetic_targets(30e6, 9e6), cache_dir=tmp_path, max_workers=2, runner=dying_runner)
+    # the killer point died twice (its retry ran alone, so it took no other point with it) ...
+    assert res.n_failed == 1
+    (bad,) = res.runs[~res.runs["ok"]].to_dict("records")
+    assert (bad["E_b"], bad["sigma_c"]) == (45e6, 9e6)
+    assert "BrokenProcessPool" in bad["error"] and "failed 2 times" in bad["error"]
+    # ... and every other point completed, including those in flight when the pool broke
+    assert res.runs["ok"].sum() == 5 and len(C.RunCache(tmp_path)) == 5
+    assert res.best == {"E_b": 30e6, "sigma_c": 9e6}
+
+
+def test_a_worker_process_that_dies_once_is_retried_successfully(tmp_path):
+    import functools
+
+    res = C.scan(GRID, synthetic_targets(30e6, 9e6), max_workers=2,
+                 runner=functools.partial(dying_runner, marker_dir=str(tmp_path)))
+    assert (tmp_path / "died").exists()
+    assert res.n_failed == 0 and res.n_retried >= 1
+    assert res.runs["ok"].all()
 
 
 def test_scan_with_duplicate_points_runs_each_once(tmp_path):

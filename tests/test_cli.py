@@ -7,10 +7,13 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
+import signal
 import subprocess
 import sys
 from dataclasses import asdict
 
+import h5py
 import numpy as np
 import pytest
 
@@ -114,6 +117,10 @@ def test_cli_run_matches_the_pipeline(cli_run, tiny_life):
     (["run", "--out", "x", "--particles", "0"], "--particles"),
     (["run", "--out", "x", "--seed", "-1"], "--seed"),
     (["run", "--out", "x", "--seed", "1.5"], "--seed"),
+    (["run", "--out", "x", "--checkpoint-interval", "-1"], "--checkpoint-interval"),
+    (["run", "--out", "x", "--checkpoint-interval", "nan"], "--checkpoint-interval"),
+    (["run", "--out", "x", "--checkpoint-interval", "soon"], "--checkpoint-interval"),
+    (["run", "--out", "", "--preset", "tiny"], "--out"),
     (["run", "--preset", "tiny"], "--out"),
     (["fly"], "command"),
     ([], "command"),
@@ -140,6 +147,132 @@ def test_bad_argument_in_a_subprocess(tmp_path):
     assert "--sigma-z" in proc.stderr
     assert "100" in proc.stderr
     assert not (tmp_path / "o").exists()
+
+
+# --- checkpoints: resume, refuse another run, restart, survive kills ----------------------------
+
+def _cli(out, *extra, timeout=900):
+    return subprocess.run([sys.executable, "-m", "pelletdem.cli", "run", "--preset", "tiny", "--out", str(out),
+                           "--quiet", "--threads", "1", *extra], capture_output=True, text=True,
+                          timeout=timeout, env=_env())
+
+
+def _start(out, *extra):
+    return subprocess.Popen([sys.executable, "-m", "pelletdem.cli", "run", "--preset", "tiny", "--out", str(out),
+                             "--quiet", "--threads", "1", *extra], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE, env=_env())
+
+
+def _kill_after(out, delay, sig=signal.SIGKILL, extra=("--checkpoint-interval", "0.3")):
+    """Start the tiny run and send `sig` after `delay` s; returns its exit status (negative:
+    killed by that signal; 0: it finished first)."""
+    proc = _start(out, *extra)
+    try:
+        proc.wait(timeout=delay)
+    except subprocess.TimeoutExpired:
+        proc.send_signal(sig)
+        proc.wait(timeout=120)
+    proc.stderr.close()
+    return proc.returncode
+
+
+def _final(out):
+    """summary.json and every snapshot array of result.h5 in `out`."""
+    summary = json.loads((out / "summary.json").read_text())
+    with h5py.File(out / "result.h5", "r") as f:
+        arrays = {f"{name}/{key}": f[f"snapshots/{name}/{key}"][()] for name in f["snapshots"]
+                  for key in f[f"snapshots/{name}"]}
+        arrays["diametral/sigma_1"] = f["stages/diametral/series/sigma_1"][()]
+    return summary, arrays
+
+
+def assert_same_run(out, ref):
+    """sigma_f and dL_f/D in summary.json equal, and every snapshot (positions, velocities,
+    forces, ...) and the sigma_1 curve in result.h5 equal bit for bit."""
+    (s, a), (s_ref, a_ref) = _final(out), _final(ref)
+    assert (s["sigma_f_mpa"], s["dLf_D"]) == (s_ref["sigma_f_mpa"], s_ref["dLf_D"])
+    assert s["steps"] == s_ref["steps"]
+    assert sorted(a) == sorted(a_ref)
+    for key, value in a_ref.items():
+        assert np.array_equal(a[key], value), key
+    assert not [p.name for p in out.iterdir() if p.name.startswith(".tmp-")]
+
+
+def test_rerunning_a_finished_run_resumes_from_its_last_checkpoint(cli_run, tmp_path):
+    ref, _ = cli_run
+    out = tmp_path / "again"
+    shutil.copytree(ref, out)
+    proc = _cli(out)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert_same_run(out, ref)
+
+
+def test_another_run_in_the_same_directory_is_refused_and_restart_discards(cli_run, tmp_path):
+    ref, _ = cli_run
+    out = tmp_path / "other"
+    shutil.copytree(ref, out)
+    before = (out / "result.h5").read_bytes()
+    proc = _cli(out, "--seed", "1")
+    assert proc.returncode == 2
+    assert "another run (seed: 0 in the checkpoint, 1 now" in proc.stderr and "--restart" in proc.stderr
+    assert "Traceback" not in proc.stderr
+    assert (out / "result.h5").read_bytes() == before
+    proc = _cli(out, "--seed", "1", "--particles", "60", "--restart")
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    s = json.loads((out / "summary.json").read_text())
+    assert (s["seed"], s["n_particles"]) == (1, 60)
+
+
+def test_a_run_killed_with_sigkill_resumes_to_the_same_bits(cli_run, tmp_path):
+    ref, _ = cli_run
+    out = tmp_path / "killed"
+    assert _kill_after(out, 4.0) == -signal.SIGKILL
+    assert (out / "checkpoint.h5").is_file() and not (out / "result.h5").exists()
+    proc = _cli(out, "--checkpoint-interval", "0.3")
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert_same_run(out, ref)
+
+
+# When the run is killed, as fractions of an uninterrupted run's duration (the reference run's
+# time plus ~1.5 s to start the interpreter): they land in every stage, some during a write.
+KILL_FRACTIONS = [0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 0.97]
+
+
+@pytest.mark.slow
+def test_sigkill_at_many_moments_and_repeated_kills(cli_run, tmp_path):
+    ref, _ = cli_run
+    duration = json.loads((ref / "summary.json").read_text())["total_wall_time_s"] + 1.5
+    outcomes = []
+    for k, fraction in enumerate(KILL_FRACTIONS):
+        delay = round(fraction * duration, 2)
+        out = tmp_path / f"k{k}"
+        rc = _kill_after(out, delay)
+        stage = "-"
+        if (out / "checkpoint.h5").exists():
+            with h5py.File(out / "checkpoint.h5", "r") as f:
+                done = json.loads(f.attrs["stages_done"])
+                stage = f"after {done[-1] if done else 'start'}" + (
+                    f", inside {f['progress'].attrs['stage']}" if "progress" in f else "")
+        # every other one is killed again in its resumed run before it may finish
+        rc2 = _kill_after(out, round(0.3 * duration, 2)) if k % 2 and rc == -signal.SIGKILL else None
+        proc = _cli(out, "--checkpoint-interval", "0.3")
+        assert proc.returncode == 0, proc.stderr[-3000:]
+        assert_same_run(out, ref)
+        outcomes.append((delay, rc, stage) + (() if rc2 is None else (f"killed again: {rc2}",)))
+    print("kill outcomes (delay s, exit status, checkpoint at the kill):", outcomes)
+    # The machine's load moves the kills about; most must land before the run ends.
+    assert sum(o[1] == -signal.SIGKILL for o in outcomes) >= 6
+
+
+@pytest.mark.slow
+def test_ctrl_c_leaves_a_resumable_run(cli_run, tmp_path):
+    ref, _ = cli_run
+    out = tmp_path / "sigint"
+    rc = _kill_after(out, 5.0, sig=signal.SIGINT)
+    assert rc != 0  # KeyboardInterrupt: exit status 1 (or -SIGINT)
+    proc = _cli(out, "--checkpoint-interval", "0.3")
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert_same_run(out, ref)
 
 
 # --- pipeline ------------------------------------------------------------------------------------

@@ -197,6 +197,7 @@ py::dict wall_to_dict(const Wall& w) {
   // unloading stage takes the piston's peak load from them), so a restored world needs them.
   d["force"] = copy_vec3({w.force});
   d["torque"] = copy_vec3({w.torque});
+  d["radial_force"] = w.radial_force;
   d["max_overlap_ratio"] = w.max_overlap_ratio;
   d["max_overlap_particle"] = static_cast<long>(w.max_overlap_particle);
   d["crushable"] = w.crushable;
@@ -231,6 +232,7 @@ Wall wall_from_dict(const py::dict& d) {
   if (d.contains("force")) {  // older checkpoints lack them: zero until the next step
     w.force = vec3_from(d, "force").at(0);
     w.torque = vec3_from(d, "torque").at(0);
+    w.radial_force = d["radial_force"].cast<double>();
     w.max_overlap_ratio = d["max_overlap_ratio"].cast<double>();
     const long who = d["max_overlap_particle"].cast<long>();
     if (who < 0) throw ParameterError("state: wall max_overlap_particle must be >= 0");
@@ -392,7 +394,7 @@ void check_pack_region(const std::vector<double>& r, double cx, double cy, doubl
     throw ParameterError(cat("fill region reaches ", reach, " m from the origin, more than 1e6 particle "
                              "diameters (2 r_max = ", 2.0 * r_max, " m): allowed |coordinate| < ",
                              2e6 * r_max, " m"));
-  require(z_hi - z_lo >= 2.0 * r_max,
+  require(!(z_hi > z_lo) || z_hi - z_lo >= 2.0 * r_max,  // (a reversed range: the engine says so)
           cat("fill region height z_hi - z_lo = ", z_hi - z_lo, " m must be >= the largest diameter ",
               2.0 * r_max, " m"));
 }
@@ -513,6 +515,35 @@ PYBIND11_MODULE(_core, m) {
                  !std::isfinite(s.ramp_duration) || !std::isfinite(s.max_overlap_seen))
                throw ParameterError(cat("state: time = ", s.time, " s, step = ", s.step,
                                         ", ramp and max_overlap_seen must be finite (step >= 0)"));
+             // What load_state does not check itself, checked before it changes anything (it
+             // checks load walls only after taking the new walls, which would leave half a state).
+             for (int k : s.load_walls)
+               if (k < 0 || k >= static_cast<int>(s.walls.size()))
+                 throw ParameterError(cat("state: load wall index ", k, " out of range 0..", s.walls.size() - 1));
+             const std::size_t n = s.r.size();
+             if (s.x.size() != n || s.v.size() != n || s.w.size() != n || s.f.size() != n ||
+                 s.t.size() != n || s.m.size() != n)
+               throw ParameterError("state: particle arrays x, v, w, f, t, r, m must all have the same length");
+             if (s.ci.size() != s.cj.size() || s.ci.size() != s.c_delta0.size() || s.ci.size() != s.c_ft.size())
+               throw ParameterError("state: contact arrays must all have the same length");
+             for (std::size_t k = 0; k < n; ++k)
+               if (!std::isfinite(s.r[k]) || !std::isfinite(s.m[k]) || !s.w[k].allFinite() ||
+                   !s.f[k].allFinite() || !s.t[k].allFinite())
+                 throw ParameterError(cat("state: particle ", k, " has a non-finite radius, mass, spin, force or torque"));
+             for (std::size_t k = 0; k < s.c_ft.size(); ++k)
+               if (!std::isfinite(s.c_delta0[k]) || !s.c_ft[k].allFinite())
+                 throw ParameterError(cat("state: contact ", k, " has a non-finite history"));
+             for (std::size_t k = 0; k < s.bonds.size(); ++k) {
+               const Bond& b = s.bonds[k];
+               const bool ok = b.i != b.j && b.radius > 0.0 && std::isfinite(b.radius) && b.kn >= 0.0 &&
+                               std::isfinite(b.kn) && b.kt >= 0.0 && std::isfinite(b.kt) && b.sigma_c > 0.0 &&
+                               std::isfinite(b.sigma_c) && b.tau_c > 0.0 && std::isfinite(b.tau_c) &&
+                               std::isfinite(b.fn) && std::isfinite(b.mn) && b.ft.allFinite() &&
+                               b.mt.allFinite() && b.n_prev.allFinite();
+               if (!ok)
+                 throw ParameterError(cat("state: bond ", k, " (", b.i, ", ", b.j, ") joins a particle to itself or has "
+                                          "a non-finite or non-positive radius, stiffness, strength or load"));
+             }
              w.load_state(s);
            },
            "Restore a state from get_state() into a world built with the same parameters.")

@@ -109,6 +109,8 @@ void World::add_particles(const std::vector<Vec3>& x, const std::vector<double>&
     }
   }
   const double rho = params_.density * params_.density_scale;
+  const std::size_t n_before = p_.size();
+  const double r_max_before = r_max_;
   for (std::size_t k = 0; k < x.size(); ++k) {
     p_.push(x[k], r[k], rho * 4.0 / 3.0 * kPi * r[k] * r[k] * r[k]);
     r_max_ = std::max(r_max_, r[k]);
@@ -116,7 +118,16 @@ void World::add_particles(const std::vector<Vec3>& x, const std::vector<double>&
   x_build_.resize(p_.size());
   list_valid_ = false;
   forces_valid_ = false;
-  validate_time_step();
+  try {
+    validate_time_step();
+  } catch (...) {
+    // Refused input leaves the world as it was, not holding particles it cannot step.
+    for (auto* a : {&p_.x, &p_.v, &p_.w, &p_.f, &p_.t}) a->resize(n_before);
+    for (auto* a : {&p_.r, &p_.m, &p_.inv_m, &p_.inv_i}) a->resize(n_before);
+    x_build_.resize(n_before);
+    r_max_ = r_max_before;
+    throw;
+  }
 }
 
 int World::add_plane(const std::string& name, const Vec3& point, const Vec3& normal) {
@@ -244,7 +255,8 @@ void World::move_walls() {
       w.radius += w.radius_rate * dt;
       if (!(w.radius > 0.0))
         throw SimulationError(cat("wall '", w.name, "': cylinder radius fell to ", w.radius,
-                                  " m at step ", step_));
+                                  " m at step ", step_, "; likely cause: radius_rate too negative "
+                                  "for the run's length"));
       moved += std::abs(w.radius_rate) * dt;
       w.travel -= w.radius_rate * dt;
     } else {
@@ -299,8 +311,9 @@ void World::step() {
   }
   if (bad >= 0)
     throw NonFiniteError(cat("particle ", bad, " has a non-finite position at step ", step_ + 1,
-                             " (t = ", time_ + dt, " s); likely causes: time step too large "
-                             "or loading speed too high"));
+                             " (t = ", time_ + dt, " s): its velocity or force became NaN or "
+                             "infinite; likely causes: time step too large, loading speed too "
+                             "high, or contact or bond parameters far outside their range"));
   move_walls();
   if (needs_rebuild(std::sqrt(max_disp2))) rebuild();
   time_ += dt;

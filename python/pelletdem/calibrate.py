@@ -672,17 +672,105 @@ def _is_dask_client(obj) -> bool:
     return type(obj).__module__.startswith("distributed") and hasattr(obj, "get_executor")
 
 
+class _RespawningPool(cf.Executor):
+    """A process pool that survives its workers: when one dies the pool is broken (every
+    pending future fails with BrokenProcessPool and submit refuses), so the next submit gets a
+    fresh pool of the same size. ``submit_isolated`` runs a call alone in a one-worker pool of
+    its own (at most ``max_workers`` at a time): a retried point that kills its worker again
+    then takes no other point down with it."""
+
+    def __init__(self, pool: cf.ProcessPoolExecutor, own: bool):
+        self._pool, self._own = pool, own
+        self._max_workers = getattr(pool, "_max_workers", None) or os.cpu_count() or 1
+        self._mp_context = getattr(pool, "_mp_context", None) or multiprocessing.get_context("spawn")
+        self._lock = threading.Lock()
+        self._made: List[cf.ProcessPoolExecutor] = []  # replacement pools, shut down with us
+        self._queue: List[tuple] = []
+        self._running = 0
+        self._isolated: set = set()
+
+    def submit(self, fn, *args, **kwargs):
+        with self._lock:
+            pool = self._pool
+        try:
+            return pool.submit(fn, *args, **kwargs)
+        except cf.BrokenExecutor:
+            with self._lock:
+                if self._pool is pool:
+                    self._pool = cf.ProcessPoolExecutor(max_workers=self._max_workers, mp_context=self._mp_context)
+                    self._made.append(self._pool)
+                pool = self._pool
+            return pool.submit(fn, *args, **kwargs)
+
+    def submit_isolated(self, fn, *args) -> cf.Future:
+        out = cf.Future()
+        with self._lock:
+            self._queue.append((fn, args, out))
+        self._pump()
+        return out
+
+    def _pump(self) -> None:
+        while True:
+            with self._lock:
+                if not self._queue or self._running >= self._max_workers:
+                    return
+                fn, args, out = self._queue.pop(0)
+                self._running += 1
+                pool = cf.ProcessPoolExecutor(max_workers=1, mp_context=self._mp_context)
+                self._isolated.add(pool)
+            try:
+                inner = pool.submit(fn, *args)
+            except BaseException as e:  # noqa: BLE001 (handed to the future)
+                self._isolated_done(None, pool, out, e)
+                continue
+            inner.add_done_callback(lambda f, pool=pool, out=out: self._isolated_done(f, pool, out))
+
+    def _isolated_done(self, f, pool, out: cf.Future, error=None) -> None:
+        # Called in the pool's own manager thread: shut it down without waiting for itself.
+        pool.shutdown(wait=False)
+        with self._lock:
+            self._running -= 1
+            self._isolated.discard(pool)
+        try:
+            if error is None:
+                error = f.exception()
+            if error is None:
+                out.set_result(f.result())
+            else:
+                out.set_exception(error)
+        except cf.InvalidStateError:  # cancelled meanwhile
+            pass
+        self._pump()
+
+    def shutdown(self, wait=True, *, cancel_futures=False):
+        with self._lock:
+            pools = list(self._made) + list(self._isolated) + ([self._pool] if self._own else [])
+            for _, _, out in self._queue:
+                out.cancel()
+            self._queue.clear()
+        for pool in pools:
+            pool.shutdown(wait=wait, cancel_futures=cancel_futures)
+
+
 @contextlib.contextmanager
 def _open_executor(executor, max_workers: Optional[int]):
     if executor is None:
         n = max_workers or os.cpu_count() or 1
         if not isinstance(n, int) or n < 1:
             raise ValueError(f"max_workers = {max_workers!r} must be an integer >= 1")
-        ex = cf.ProcessPoolExecutor(max_workers=n, mp_context=multiprocessing.get_context("spawn"))
+        ex = _RespawningPool(cf.ProcessPoolExecutor(max_workers=n, mp_context=multiprocessing.get_context("spawn")),
+                             own=True)
         try:
             yield ex
         finally:
             ex.shutdown(wait=True, cancel_futures=True)
+    elif isinstance(executor, cf.ProcessPoolExecutor):
+        # The caller's pool, kept alive by us only until it breaks; our replacements are ours.
+        ex = _RespawningPool(executor, own=False)
+        try:
+            yield ex
+        finally:
+            ex.shutdown(wait=True)
     elif isinstance(executor, str):
         if executor != "serial":
             raise ValueError(f"executor = {executor!r}: pass 'serial', None (a process pool), a "
@@ -708,7 +796,15 @@ def _with_relaxed_dir(runner, relaxed_dir):
 
 
 class _Evaluator:
-    """Submits runs, serves cached ones, never runs a key twice, writes the cache."""
+    """Submits runs, serves cached ones, never runs a key twice, writes the cache.
+
+    A run whose future raises (its worker process died: BrokenProcessPool; or the runner
+    raised) is retried once, alone in a fresh worker when the executor is a process pool; if
+    the retry fails too the point gets a failed record (``ok`` False, ``error`` with both
+    errors, ``worker_failure`` True) that is not cached, so a resumed scan tries it again, and
+    the rest of the scan goes on. KeyboardInterrupt and SystemExit are not retried."""
+
+    RETRIES = 1
 
     def __init__(self, cache: RunCache, executor, runner: Callable[[RunSpec], dict]):
         self.cache, self.executor, self.runner = cache, executor, runner
@@ -718,6 +814,8 @@ class _Evaluator:
         self.n_cached = 0       # runs served from the cache
         self.n_relaxations = 0  # relaxations done by the runs executed now
         self.sim_time_s = 0.0
+        self.n_retried = 0      # runs submitted again after their first attempt failed
+        self.failures: List[dict] = []  # points that failed every attempt: key, error, attempts
 
     def submit(self, spec: RunSpec) -> cf.Future:
         key = spec.key
@@ -742,16 +840,29 @@ class _Evaluator:
                 self.n_run -= 1
             out.set_exception(e)
             return out
-        fut.add_done_callback(lambda f: self._done(key, f, out))
+        fut.add_done_callback(lambda f: self._done(spec, f, out, []))
         return out
 
-    def _done(self, key: str, fut, out: cf.Future) -> None:
+    def _done(self, spec: RunSpec, fut, out: cf.Future, errors: List[str]) -> None:
+        key = spec.key
         try:
             rec = fut.result()
         except BaseException as e:  # noqa: BLE001
+            retry = isinstance(e, Exception) and not isinstance(e, cf.CancelledError) and not out.cancelled()
+            if retry:
+                errors = errors + [f"{type(e).__name__}: {e}"]
+                if len(errors) <= self.RETRIES:
+                    self._retry(spec, out, errors)
+                    return
+                rec = self._failed_record(spec, errors)
+                with self._lock:
+                    self._inflight.pop(key, None)
+                    self.failures.append({"key": key, "error": rec["error"], "attempts": len(errors)})
+                _set(out, result=rec)
+                return
             with self._lock:
                 self._inflight.pop(key, None)
-            out.set_exception(e)
+            _set(out, error=e)
             return
         try:
             self.cache.put(rec)
@@ -760,7 +871,26 @@ class _Evaluator:
         with self._lock:
             self.n_relaxations += 0 if rec.get("relaxed_reused") else 1
             self.sim_time_s += float(rec.get("wall_time_s", 0.0))
-        out.set_result(dict(rec, cached=False))
+        _set(out, result=dict(rec, cached=False, attempts=len(errors) + 1))
+
+    def _retry(self, spec: RunSpec, out: cf.Future, errors: List[str]) -> None:
+        with self._lock:
+            self.n_retried += 1
+        try:
+            isolated = getattr(self.executor, "submit_isolated", None)
+            fut = isolated(self.runner, spec) if isolated else self.executor.submit(self.runner, spec)
+        except Exception as e:  # noqa: BLE001 (an executor that refuses counts as a failed attempt)
+            fut = cf.Future()
+            fut.set_exception(e)
+        fut.add_done_callback(lambda f: self._done(spec, f, out, errors))
+
+    @staticmethod
+    def _failed_record(spec: RunSpec, errors: List[str]) -> dict:
+        return {"key": spec.key, "relax_key": spec.relax_key, "spec": _canon(spec.payload()), "ok": False,
+                "error": f"failed {len(errors)} times, " + "; then ".join(errors),
+                "outputs": {}, "curve": {}, "compaction_curve": {}, "relaxed_reused": True,
+                "relaxed_from": "", "wall_time_s": 0.0, "worker": "", "cached": False,
+                "attempts": len(errors), "worker_failure": True}
 
     def run_all(self, specs: Sequence[RunSpec]) -> List[dict]:
         """Records of all specs (submitted grouped by relax key), in the order given."""
@@ -775,7 +905,20 @@ class _Evaluator:
 
     def stats(self) -> dict:
         return {"n_simulations": self.n_run, "n_cached": self.n_cached,
-                "n_relaxations": self.n_relaxations, "simulation_time_s": self.sim_time_s}
+                "n_relaxations": self.n_relaxations, "simulation_time_s": self.sim_time_s,
+                "n_retried": self.n_retried, "n_failed": len(self.failures),
+                "failures": list(self.failures)}
+
+
+def _set(fut: cf.Future, result=None, error=None) -> None:
+    # A future cancelled by run_all (another point raised) takes no result.
+    try:
+        if error is not None:
+            fut.set_exception(error)
+        else:
+            fut.set_result(result)
+    except cf.InvalidStateError:
+        pass
 
 
 # --------------------------------------------------------------------------------------
@@ -1171,7 +1314,9 @@ class ScanResult:
     over seeds, ``rms_z``, ``rrmse``, ``loss`` over all targets). ``best``: the parameters of
     the lowest loss (empty without targets). ``n_simulations``: runs executed now;
     ``n_cached``: runs read from the cache; ``n_relaxations``: relaxed pellets computed now;
-    ``wall_time_s``: s.
+    ``wall_time_s``: s. ``n_retried``: runs tried again after a failed attempt (a worker
+    died or the runner raised); ``failures``: the runs that failed again ({key, error,
+    attempts}; their rows in ``runs`` have ok False and the error text), ``n_failed`` of them.
     """
 
     runs: Any
@@ -1181,6 +1326,9 @@ class ScanResult:
     n_cached: int
     n_relaxations: int
     wall_time_s: float
+    n_retried: int = 0
+    n_failed: int = 0
+    failures: list = field(default_factory=list)
 
 
 def _grid(param_grid: Mapping[str, Sequence[float]]) -> Tuple[List[str], List[dict]]:
@@ -1293,7 +1441,8 @@ def scan(param_grid: Mapping[str, Sequence[float]], targets=None, *, preset="tin
     st = ev.stats()
     return ScanResult(runs=runs, points=pts, best=best, n_simulations=st["n_simulations"],
                       n_cached=st["n_cached"], n_relaxations=st["n_relaxations"],
-                      wall_time_s=time.perf_counter() - t0)
+                      wall_time_s=time.perf_counter() - t0, n_retried=st["n_retried"],
+                      n_failed=st["n_failed"], failures=st["failures"])
 
 
 # --------------------------------------------------------------------------------------
@@ -1312,6 +1461,8 @@ class FitResult:
     ``message``: why the fit stopped. ``n_points``: parameter points evaluated;
     ``n_simulations`` / ``n_cached`` / ``n_relaxations``: runs executed / read from the cache /
     relaxations done; ``wall_time_s``: s. ``method``: 'scaling' or 'nelder-mead'.
+    ``n_retried`` / ``n_failed``: runs tried again after a failed attempt / that failed again
+    (their points have ok False and the error text in ``history``).
     """
 
     params: dict
@@ -1330,6 +1481,8 @@ class FitResult:
     wall_time_s: float
     method: str
     targets: list = field(default_factory=list)
+    n_retried: int = 0
+    n_failed: int = 0
 
 
 def _history_row(names, point: _Point, targets) -> dict:
@@ -1569,7 +1722,9 @@ def fit(params: Mapping[str, Sequence[float]], targets, *, start: Optional[Mappi
                      n_simulations=after["n_simulations"] - before["n_simulations"],
                      n_cached=after["n_cached"] - before["n_cached"],
                      n_relaxations=after["n_relaxations"] - before["n_relaxations"],
-                     wall_time_s=time.perf_counter() - t0, method=method, targets=tg)
+                     wall_time_s=time.perf_counter() - t0, method=method, targets=tg,
+                     n_retried=after["n_retried"] - before["n_retried"],
+                     n_failed=after["n_failed"] - before["n_failed"])
 
 
 # --------------------------------------------------------------------------------------

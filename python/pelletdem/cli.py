@@ -1,5 +1,10 @@
 """Command line: `pelletdem run --preset quick --out DIR` runs one pellet from fill to
-breakage and writes result.h5, result.xdmf, PNG plots and summary.json into DIR."""
+breakage and writes result.h5, result.xdmf, PNG plots and summary.json into DIR.
+
+The run is checkpointed to DIR/checkpoint.h5 at every stage end and every
+--checkpoint-interval seconds inside a stage; the same command again on the same DIR resumes
+from the last checkpoint (a killed run ends with the same bits as one never stopped), other
+arguments are refused, and --restart starts afresh."""
 from __future__ import annotations
 
 import argparse
@@ -9,27 +14,48 @@ import sys
 import time
 
 
+# The arguments that define a run: a checkpoint made with other values is not resumed.
+RUN_ARGS = ("preset", "material", "mc", "sigma_z", "seed", "threads", "particles")
+
+
 def _run(args) -> int:
-    from . import plots
+    from . import pipeline, plots
+    from ._version import __version__
+    from .checkpoint import RunCheckpoint
     from .measured import variant
-    from .pipeline import run_pellet
 
     t0 = time.perf_counter()
     v = variant(args.material, args.mc, args.sigma_z)  # validates the variant before any work
-    res = run_pellet(preset=args.preset, material=args.material, mc=args.mc,
-                     sigma_z_mpa=args.sigma_z, seed=args.seed, threads=args.threads,
-                     n_particles=args.particles, progress=False if args.quiet else None)
     os.makedirs(args.out, exist_ok=True)
+    # A run killed while writing leaves its temporary file (h5io.atomic_h5) behind: the file
+    # it was replacing is whole, the temporary is not, and nothing else reads it.
+    for name in os.listdir(args.out):
+        if (name.startswith(".tmp-") and (name.endswith(".h5") or name == ".tmp-summary.json")) or \
+                name.endswith(".xdmf.tmp"):
+            os.remove(os.path.join(args.out, name))
+    ck_path = os.path.join(args.out, "checkpoint.h5")
+    if args.restart and os.path.exists(ck_path):
+        os.remove(ck_path)
+    run_args = {k: getattr(args, k) for k in RUN_ARGS}
+    run_args["version"] = __version__
+    ck = RunCheckpoint(ck_path, run_args, interval=args.checkpoint_interval)
+    res = pipeline.run_pellet(preset=args.preset, material=args.material, mc=args.mc,
+                              sigma_z_mpa=args.sigma_z, seed=args.seed, threads=args.threads,
+                              n_particles=args.particles, progress=False if args.quiet else None,
+                              checkpoint=ck)
     res.save(os.path.join(args.out, "result.h5"))
     pngs = plots.save_all(res, args.out, variant=v)
     summary = res.summary()
     summary.update({"preset": args.preset, "material": args.material, "mc_percent": args.mc,
                     "sigma_z_mpa": args.sigma_z, "threads": args.threads,
                     "measured_sigma_f_mpa": v.sigma_f / 1e6, "measured_dLf_D": v.dLf_D,
-                    "total_wall_time_s": round(time.perf_counter() - t0, 3),
+                    "total_wall_time_s": round(max(ck.wall_time_s, time.perf_counter() - t0), 3),
                     "plots": [os.path.basename(p) for p in pngs]})
-    with open(os.path.join(args.out, "summary.json"), "w") as fh:
+    # Written beside and renamed, like the HDF5 files: a kill never leaves half a summary.
+    tmp = os.path.join(args.out, ".tmp-summary.json")
+    with open(tmp, "w") as fh:
         json.dump(summary, fh, indent=2)
+    os.replace(tmp, os.path.join(args.out, "summary.json"))
     print(json.dumps(summary, indent=2))
     return 0
 
@@ -48,15 +74,43 @@ def main(argv=None) -> int:
     r.add_argument("--threads", type=int, default=min(2, os.cpu_count() or 1))
     r.add_argument("--particles", type=int, default=None, help="override the preset's particle count")
     r.add_argument("--quiet", action="store_true", help="no progress bars")
+    r.add_argument("--checkpoint-interval", type=float, default=300.0, metavar="SECONDS",
+                   help="wall time between checkpoints (DIR/checkpoint.h5) inside a stage, s; "
+                        "one is written at every stage end too (default 300)")
+    r.add_argument("--restart", action="store_true",
+                   help="discard DIR's checkpoint and start again (by default a run resumes from it)")
+    from . import loop_cli
+
+    loop_cli.add_parser(sub)
     args = ap.parse_args(argv)
+    if args.command == "loop":
+        try:
+            return loop_cli.run(args)
+        except ValueError as e:  # a bad --synthetic or data file, named before any work
+            print(f"pelletdem loop: error: {e}", file=sys.stderr)
+            return 2
     if args.command == "run":
-        if args.threads < 1:
-            ap.error(f"--threads = {args.threads} must be >= 1")
+        if not args.out.strip() or (os.path.exists(args.out) and not os.path.isdir(args.out)):
+            ap.error(f"--out = {args.out!r} must name a directory (it is empty or an existing file)")
+        if not (args.checkpoint_interval >= 0):  # also NaN
+            ap.error(f"--checkpoint-interval = {args.checkpoint_interval} must be >= 0 s")
+        if args.threads < 1 or args.threads > 1024:
+            ap.error(f"--threads = {args.threads} is out of range: allowed 1 <= threads <= 1024")
         if args.particles is not None and args.particles < 1:
             ap.error(f"--particles = {args.particles} must be >= 1")
-        if args.seed < 0:
-            ap.error(f"--seed = {args.seed} must be >= 0")
-        return _run(args)
+        if args.particles is not None and args.particles > 10_000_000:
+            ap.error(f"--particles = {args.particles} is out of range: allowed 1 <= particles <= 10000000")
+        if args.seed < 0 or args.seed > 2**62:
+            ap.error(f"--seed = {args.seed} is out of range: allowed 0 <= seed <= 2**62")
+        from .checkpoint import CheckpointError
+
+        try:
+            return _run(args)
+        except (CheckpointError, OSError) as e:
+            # A checkpoint of another run or a damaged one, an --out that cannot be written, a
+            # full disk: say what is wrong, no traceback (the last checkpoint stays whole).
+            print(f"pelletdem: error: {e}", file=sys.stderr)
+            return 2
     return 2
 
 

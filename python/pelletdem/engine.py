@@ -121,7 +121,8 @@ class BondLaw:
 
 @dataclass
 class RunOutcome:
-    """Why a run stopped: `reason` is the name of the condition that fired, or 'max_steps'."""
+    """Why a run stopped: `reason` is the name of the condition that fired, or 'max_steps';
+    `steps` the steps run in this call; `time` the world's clock when it stopped, s."""
 
     reason: str
     steps: int
@@ -154,17 +155,23 @@ class World:
                  contact: Optional[ContactLaw] = None, density: float = 680.0,
                  density_scale: float = 1e4, gravity=(0.0, 0.0, -9.81), skin: float = 0.0,
                  threads: int = 1, max_overlap_ratio: float = 0.9, sample_interval: int = 100):
-        contact = contact or ContactLaw()
+        contact = ContactLaw() if contact is None else contact
+        if not isinstance(contact, ContactLaw):
+            raise ParameterError(f"contact must be a ContactLaw, got {type(contact).__name__}")
+        try:
+            lo, hi = (_vec3("box", corner) for corner in box)
+        except (TypeError, ValueError):
+            raise ParameterError(f"box must be ((xlo, ylo, zlo), (xhi, yhi, zhi)) in m, got {box!r}") from None
+        gravity = _vec3("gravity", gravity)
         # Kept so that a saved state can rebuild an identical world (see get_state/from_state).
         object.__setattr__(self, "_init_kwargs", dict(
-            dt=dt, box=(tuple(map(float, box[0])), tuple(map(float, box[1]))), contact=asdict(contact),
-            density=density, density_scale=density_scale, gravity=tuple(map(float, gravity)), skin=skin,
+            dt=dt, box=(lo, hi), contact=asdict(contact),
+            density=density, density_scale=density_scale, gravity=gravity, skin=skin,
             threads=threads, max_overlap_ratio=max_overlap_ratio, sample_interval=sample_interval))
         p = _core.WorldParams()
         p.dt = _finite("dt", dt)
-        lo, hi = box
-        p.box_lo = [_finite("box", v) for v in lo]
-        p.box_hi = [_finite("box", v) for v in hi]
+        p.box_lo = list(lo)
+        p.box_hi = list(hi)
         p.contact = contact.to_core()
         p.density = _finite("density", density)
         p.density_scale = _finite("density_scale", density_scale)
@@ -174,6 +181,8 @@ class World:
         p.max_overlap_ratio = _finite("max_overlap_ratio", max_overlap_ratio)
         p.sample_interval = _int("sample_interval", sample_interval, 1, 10**12)
         object.__setattr__(self, "_core", _core.World(p))
+        # Samples restored from a saved state, ahead of the engine's own (see samples()).
+        object.__setattr__(self, "_sample_prefix", None)
         self.box = (tuple(lo), tuple(hi))
 
     def __getattr__(self, name):
@@ -188,7 +197,8 @@ class World:
                               progress=progress)
 
     def run_until(self, max_steps: int, progress: Optional[Callable[[int], None]] = None,
-                  check_interval: int = 1, **conditions) -> RunOutcome:
+                  check_interval: int = 1, between: Optional[Callable[[int], None]] = None,
+                  **conditions) -> RunOutcome:
         """Run until the first condition holds or `max_steps` steps have run.
 
         Conditions (keyword=value): time (s), steps, kinetic_energy_below (J, scaled mass),
@@ -196,6 +206,11 @@ class World:
         wall_force_above=(wall, N), wall_force_below=(wall, N) (compressive normal force),
         wall_travel_above=(wall, m), load_marker_above (m). kinetic_energy_below is tested
         every `check_interval` steps (it costs one pass over the particles).
+
+        The run goes in chunks of about 0.1 s of wall time with the GIL released; between
+        chunks Ctrl-C is served and `progress(steps_done)` called. `between(steps_done)` is
+        called only when the run continues after a chunk: the world is then between two steps
+        and no condition has fired, the safe point for a checkpoint (see pelletdem.checkpoint).
         """
         max_steps = _int("max_steps", max_steps, 0, 10**13)
         conds, names = [], []
@@ -206,12 +221,12 @@ class World:
             if name.startswith("wall_"):
                 if not (isinstance(value, (tuple, list)) and len(value) == 2):
                     raise ParameterError(f"{name} must be (wall index, value)")
-                wall, value = int(value[0]), value[1]
+                wall, value = _int(f"{name} wall index", value[0], 0, 2**31 - 1), value[1]
             interval = check_interval if name.endswith("kinetic_energy_below") else 1
             conds.append(_core.StopCondition(_CONDITIONS[name], _finite(name, value), wall,
                                              _int("check_interval", interval, 1, 10**9)))
             names.append(name)
-        index, steps = self._core.run_until(conds, max_steps, progress)
+        index, steps = self._core.run_until(conds, max_steps, progress, between)
         reason = names[index] if index >= 0 else "max_steps"
         return RunOutcome(reason, int(steps), self.time)
 
@@ -236,8 +251,54 @@ class World:
         new = World.__new__(World)
         object.__setattr__(new, "_core", self._core.clone())
         object.__setattr__(new, "_init_kwargs", dict(self._init_kwargs))
+        object.__setattr__(new, "_sample_prefix", self._sample_prefix)  # never mutated in place
         new.box = self.box
         return new
+
+    # --- time series: the engine's samples, after any restored from a saved state -------------
+    def samples(self) -> dict:
+        """The global time series since the last clear_samples(), as arrays: time (s),
+        kinetic_energy (J), coordination_number, max_overlap_ratio, load_marker (m), n_contacts,
+        n_bonds_intact, n_bonds_broken. Includes the samples of a restored state."""
+        now = self._core.samples()
+        pre = self._sample_prefix
+        if pre is None:
+            return now
+        return {k: np.concatenate([pre["samples"][k], v]) for k, v in now.items()}
+
+    def wall_samples(self, wall: int) -> dict:
+        """Wall `wall`'s time series since the last clear_samples(): time (s), force (N, 3),
+        normal_force (N), point (m, 3), radius (m), travel (m)."""
+        now = self._core.wall_samples(wall)
+        pre = self._sample_prefix
+        if pre is None or wall >= len(pre["wall_samples"]):
+            return now
+        old = pre["wall_samples"][wall]
+        return {k: np.concatenate([np.asarray(old[k]).reshape((-1,) + v.shape[1:]), v]) for k, v in now.items()}
+
+    def clear_samples(self) -> None:
+        """Forget every time series recorded so far (global and per wall)."""
+        object.__setattr__(self, "_sample_prefix", None)
+        self._core.clear_samples()
+
+    def _restore_samples(self, samples: Optional[dict], wall_samples) -> None:
+        # The engine keeps no way to load samples; they are served ahead of its own instead.
+        self._core.clear_samples()
+        if samples is None:
+            object.__setattr__(self, "_sample_prefix", None)
+            return
+        want = set(self._core.samples())
+        if set(samples) != want:
+            raise ParameterError(f"state['samples'] must have the keys {sorted(want)}, got {sorted(samples)}")
+        ws = [{k: np.asarray(v) for k, v in d.items()} for d in (wall_samples or [])]
+        if len(ws) > self._core.wall_count:
+            raise ParameterError(f"state['wall_samples'] has {len(ws)} entries for {self._core.wall_count} walls")
+        for k, d in enumerate(ws):
+            wanted = set(self._core.wall_samples(k))
+            if set(d) != wanted:
+                raise ParameterError(f"state['wall_samples'][{k}] must have the keys {sorted(wanted)}")
+        object.__setattr__(self, "_sample_prefix", {
+            "samples": {k: np.asarray(v) for k, v in samples.items()}, "wall_samples": ws})
 
     def create_bonds(self, law) -> int:
         """Bond every touching pair (and pairs within law.gap_tolerance), stress-free now.
@@ -258,31 +319,54 @@ class World:
         self._core.set_contact_params(law.to_core())
 
     def get_state(self) -> dict:
-        """The whole state (particles with their last forces, every contact's history, walls,
-        bonds, broken bonds, the clock) plus the construction parameters, as a dict of numpy
-        arrays and plain values. `World.from_state` rebuilds a world that continues bit for bit
-        (at the same thread count)."""
+        """The whole state (particles with their last forces, every contact's history, walls
+        with their last forces, bonds, broken bonds, the clock, the time series recorded since
+        the last clear_samples()) plus the construction parameters and the current sample
+        interval and overlap guard, as a dict of numpy arrays and plain values.
+        `World.from_state` rebuilds a world that continues bit for bit (at the same thread
+        count) and returns the same samples() and wall_samples()."""
         state = self._core.get_state()
         kw = dict(self._init_kwargs)
         kw["threads"] = self._core.threads
         kw["dt"] = self._core.dt
         kw["gravity"] = tuple(self._core.gravity)
         kw["contact"] = _contact_dict(self._core.contact_params)
+        kw["sample_interval"] = self._core.sample_interval
+        kw["max_overlap_ratio"] = self._core.max_overlap_ratio
         state["params"] = kw
+        # The time series so far, so that a stage resumed from a checkpoint returns all of it.
+        state["samples"] = self.samples()
+        state["wall_samples"] = [self.wall_samples(k) for k in range(self._core.wall_count)]
         return state
 
     @classmethod
     def from_state(cls, state: dict, threads: Optional[int] = None) -> "World":
         """A world rebuilt from `get_state()`; `threads` overrides the saved thread count."""
-        if not isinstance(state, dict) or "params" not in state:
+        if not isinstance(state, dict) or not isinstance(state.get("params"), dict):
             raise ParameterError("state must be a dict from World.get_state() (missing 'params')")
         kw = dict(state["params"])
-        kw["contact"] = ContactLaw(**kw["contact"])
-        if threads is not None:
-            kw["threads"] = threads
-        w = cls(**kw)
+        try:
+            kw["contact"] = ContactLaw(**kw["contact"])
+            if threads is not None:
+                kw["threads"] = threads
+            w = cls(**kw)
+        except (KeyError, TypeError) as e:
+            raise ParameterError(f"state['params'] is not from World.get_state(): {type(e).__name__}: {e}") from None
         w._core.set_state(state)
+        samples = state.get("samples")
+        if samples is not None:
+            if not isinstance(samples, dict) or not isinstance(state.get("wall_samples", []), (list, tuple)):
+                raise ParameterError("state['samples'] must be a dict and state['wall_samples'] a list of dicts")
+            w._restore_samples(samples, state.get("wall_samples"))
         return w
+
+    def restore_state(self, state: dict) -> None:
+        """Make this world, in place, the one saved in `state` (from get_state(), with its
+        construction parameters and thread count). The engine object underneath is replaced,
+        so numpy views (x, v, ...) taken before the call keep showing the old one."""
+        fresh = World.from_state(state)
+        for name in ("_core", "_init_kwargs", "_sample_prefix", "box"):
+            object.__setattr__(self, name, getattr(fresh, name))
 
     def __setattr__(self, name, value):
         # Settable engine properties (dt, threads, gravity) go to C++; the rest stays here.
@@ -294,6 +378,17 @@ class World:
 
 def _contact_dict(c) -> dict:
     return {f.name: getattr(c, f.name) for f in fields(ContactLaw)}
+
+
+def _vec3(name: str, value) -> tuple:
+    """Three finite floats, or ParameterError naming `name`."""
+    try:
+        items = list(value)
+    except TypeError:
+        raise ParameterError(f"{name} must have 3 components, got {value!r}") from None
+    if len(items) != 3 or isinstance(value, (str, bytes)):
+        raise ParameterError(f"{name} must have 3 components, got {value!r}")
+    return tuple(_finite(name, v) for v in items)
 
 
 def _finite(name: str, value) -> float:
@@ -321,7 +416,7 @@ def truncated_normal_radii(n: int, mean: float = 2e-4, sd: float = 2e-5, r_min: 
                            r_max: float = 2.6e-4, seed: int = 0) -> np.ndarray:
     """Radii (m) from a normal distribution truncated to [r_min, r_max] (the paper's 0.2 mm
     mean, 0.02 mm SD, 0.14-0.26 mm range by default), reproducible for a seed."""
-    return np.asarray(_core.truncated_normal_radii(_int("n", n, 0, 10**8), mean, sd, r_min, r_max,
+    return np.asarray(_core.truncated_normal_radii(_int("n", n, 0, 10**7), mean, sd, r_min, r_max,
                                                    _int("seed", seed, 0, 2**63 - 1)))
 
 

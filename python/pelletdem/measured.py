@@ -526,6 +526,12 @@ def _read_raw(path) -> _RawTable:
         text = path.read_text(encoding="utf-8-sig")  # -sig: Excel writes a BOM
     except OSError as exc:
         raise MeasuredDataError(path, f"cannot read the file ({exc.strerror or exc})") from exc
+    except UnicodeDecodeError as exc:
+        raise MeasuredDataError(path, f"is not UTF-8 text (byte {exc.start}: {exc.reason}); export the "
+                                "data as UTF-8 CSV") from None
+    if "\x00" in text:
+        # csv refuses NUL bytes with its own error type; a binary file is not a table.
+        raise MeasuredDataError(path, f"contains a NUL byte at character {text.index(chr(0))}: not a text table")
     meta: dict[str, str] = {}
     header: list[str] | None = None
     delim = ","
@@ -765,18 +771,22 @@ class Peak:
 
     @property
     def sigma_f_mean(self) -> float:
+        """Mean tensile strength over the replicates, Pa."""
         return float(np.mean(self.sigma_f))
 
     @property
     def sigma_f_sd(self) -> float:
+        """Sample SD of the tensile strength over the replicates, Pa (NaN for one)."""
         return float(_sample_sd(self.sigma_f))
 
     @property
     def dLf_D_mean(self) -> float:
+        """Mean deformation at failure over the replicates (-)."""
         return float(np.mean(self.dLf_D))
 
     @property
     def dLf_D_sd(self) -> float:
+        """Sample SD of the deformation at failure over the replicates (-; NaN for one)."""
         return float(_sample_sd(self.dLf_D))
 
 

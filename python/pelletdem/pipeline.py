@@ -51,7 +51,8 @@ def break_pellet(pellet, bond_law: BondLaw, result: Optional[Result] = None,
                  plate_speed: Optional[float] = None, max_dLD: Optional[float] = None,
                  progress: Optional[bool] = None) -> Result:
     """Bond a relaxed pellet and run the diametral test on it. The Pellet is used up (clone its
-    world first to branch). Returns `result` (or a new one) with the bond and diametral stages."""
+    world first to branch). `plate_speed` (m/s) and `max_dLD` (-) default to the preset's.
+    Returns `result` (or a new one) with the bond and diametral stages."""
     res = result if result is not None else Result(params={}, seed=-1, version=__version__)
     res.params["bond"] = asdict(bond_law)
     res.stages["bond"] = stages.bond(pellet, bond_law, progress=progress)
@@ -62,15 +63,54 @@ def break_pellet(pellet, bond_law: BondLaw, result: Optional[Result] = None,
 
 def run_pellet(preset="quick", material: str = "oak", mc: float = 8, sigma_z_mpa: float = 120,
                seed: int = 0, threads: int = 1, bond_law: Optional[BondLaw] = None,
-               n_particles: Optional[int] = None, progress: Optional[bool] = None) -> Result:
+               n_particles: Optional[int] = None, progress: Optional[bool] = None,
+               checkpoint=None) -> Result:
     """Fill to broken pellet for one variant (material, mc in %, sigma_z in MPa). The bond
-    parameters default to the paper's Table 5 values for that variant. Returns the Result."""
+    parameters default to the paper's Table 5 values for that variant. Returns the Result.
+
+    `checkpoint`: a checkpoint.RunCheckpoint to save the run to at every stage end and every
+    `interval` s of wall time inside a stage, and to resume it from when its file exists; the
+    result is the same, bit for bit at the same thread count, as a run never stopped.
+    """
     law = bond_law if bond_law is not None else bond_law_for(material, mc, sigma_z_mpa)
     law.to_core()  # a bad bond law fails here, not after the relaxation
     t0 = time.perf_counter()
-    pellet, res = relaxed_pellet(preset, sigma_z=sigma_z_mpa * 1e6, seed=seed, threads=threads,
-                                 n_particles=n_particles, progress=progress)
-    res.params.update({"material": material, "mc_percent": mc, "sigma_z_mpa": sigma_z_mpa})
-    break_pellet(pellet, law, res, progress=progress)
-    res.params["total_wall_time_s"] = time.perf_counter() - t0
+    p = _preset(preset)
+    if not isinstance(threads, int) or isinstance(threads, bool) or not 1 <= threads <= 1024:
+        raise ParameterError(f"threads = {threads!r} is out of range: allowed 1 <= threads <= 1024")
+    sigma_z = sigma_z_mpa * 1e6
+    stages.check_sigma_z(sigma_z)  # before the fill, not after it
+    # The same stages, arguments and params as relaxed_pellet + break_pellet.
+    life = [
+        ("fill", lambda _: stages.fill(p, seed=seed, threads=threads, n_particles=n_particles, progress=progress)),
+        ("compact", lambda pe: (pe, stages.compact(pe, sigma_z, progress=progress))),
+        ("unload", lambda pe: (pe, stages.unload(pe, progress=progress))),
+        ("demould", lambda pe: (pe, stages.demould(pe, progress=progress))),
+        ("relax", lambda pe: (pe, stages.relax(pe, progress=progress))),
+        ("bond", lambda pe: (pe, stages.bond(pe, law, progress=progress))),
+        ("diametral", lambda pe: (pe, stages.diametral(pe, speed=None, max_dLD=None, progress=progress))),
+    ]
+    res = Result(params={"preset": asdict(p), "sigma_z": sigma_z, "threads": threads,
+                         "n_particles": n_particles, "material": material, "mc_percent": mc,
+                         "sigma_z_mpa": sigma_z_mpa, "bond": asdict(law)},
+                 seed=seed, version=__version__)
+    pellet, done, prior = None, 0, 0.0
+    saved = checkpoint.resume() if checkpoint is not None else None
+    if saved is not None:
+        res, pellet, done, prior = saved.result, saved.make_pellet(p), len(saved.stages_done), saved.wall_time_s
+        if [name for name, _ in life[:done]] != saved.stages_done:
+            raise ParameterError(f"checkpoint {checkpoint.path}: finished stages {saved.stages_done} "
+                                 f"are not the first of {[n for n, _ in life]}")
+    for name, run in life[done:]:
+        if checkpoint is None:
+            pellet, st = run(pellet)
+        else:
+            with checkpoint.stage(name, pellet, res) as journal:
+                pellet, st = run(pellet)
+            st.wall_time_s += journal.prior_elapsed_s
+        res.stages[name] = st
+        if checkpoint is not None:
+            checkpoint.stage_done(pellet, res)
+    res.snapshots.update(pellet.snapshots)
+    res.params["total_wall_time_s"] = prior + time.perf_counter() - t0
     return res

@@ -15,9 +15,13 @@ class Preset:
     normal radii, m. density: particle density, kg/m^3; density_scale: mass factor (gravity
     divided by it). dt: time step, s. piston_speed, unload_speed, plate_speed, demould_rate: m/s
     (the laboratory's 3.3e-5 m/s is out of reach, see README "Quasi-static control").
-    fill_solid_fraction: solid fraction of the random-placement region. ke_threshold: relaxation
-    ends when the kinetic energy (scaled mass) falls below it, J. bond_ramp_time: adhesion goes
-    from full to zero over it, s. max_dLD: diametral test ends at this dL/D.
+    fill_solid_fraction: solid fraction of the random-placement region (-). fill_gravity_factor:
+    gravity is raised by this factor while the bed settles (-). ke_threshold: relaxation ends
+    when the kinetic energy (scaled mass) falls below it, J. relax_max_time: the relaxation's
+    time limit, s. bond_ramp_time: adhesion goes from full to zero over it, s. max_dLD: the
+    diametral test ends at this dL/D (-). sample_points: samples recorded per stage.
+    max_overlap_ratio: the engine's guard on overlap / radius (-). contact: the ContactLaw.
+    Every field with its default and source: docs/parameters.md.
     """
 
     name: str

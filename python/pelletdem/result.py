@@ -65,31 +65,28 @@ class Result:
         leaves any previous file whole) and, if `xdmf`, an XDMF file beside it. Returns path."""
         path = os.fspath(path)
         with atomic_h5(path, FORMAT) as f:
-            f.attrs["version"] = self.version
-            f.attrs["seed"] = self.seed
-            f.attrs["params"] = json.dumps(self.params, default=_jsonable)
-            for name, st in self.stages.items():
-                g = f.create_group(f"stages/{name}")
-                g.attrs["wall_time_s"] = st.wall_time_s
-                g.attrs["steps"] = st.steps
-                g.attrs["order"] = list(self.stages).index(name)
-                sc = g.create_group("scalars")
-                for k, v in st.scalars.items():
-                    sc.attrs[k] = float(v)
-                se = g.create_group("series")
-                for k, v in st.series.items():
-                    se.create_dataset(k, data=np.asarray(v))
-            for name, snap in self.snapshots.items():
-                g = f.create_group(f"snapshots/{name}")
-                g.attrs["order"] = list(self.snapshots).index(name)
-                for k, v in snap.items():
-                    if np.ndim(v) == 0:
-                        g.attrs[k] = float(v)
-                    else:
-                        g.create_dataset(k, data=np.asarray(v))
+            self._write(f)
         if xdmf:
             write_xdmf(self, path)
         return path
+
+    def _write(self, f) -> None:
+        """Everything into an open HDF5 file or group (a checkpoint keeps a Result in one)."""
+        f.attrs["version"] = self.version
+        f.attrs["seed"] = self.seed
+        f.attrs["params"] = json.dumps(self.params, default=_jsonable)
+        for name, st in self.stages.items():
+            g = f.create_group(f"stages/{name}")
+            g.attrs["wall_time_s"] = st.wall_time_s
+            g.attrs["steps"] = st.steps
+            g.attrs["order"] = list(self.stages).index(name)
+            sc = g.create_group("scalars")
+            for k, v in st.scalars.items():
+                sc.attrs[k] = float(v)
+            se = g.create_group("series")
+            for k, v in st.series.items():
+                se.create_dataset(k, data=np.asarray(v))
+        write_snapshots(f, self.snapshots)
 
     @classmethod
     def load(cls, path: str) -> "Result":
@@ -115,13 +112,32 @@ class Result:
                 name, series={k: g["series"][k][()] for k in g["series"]},
                 scalars={k: float(v) for k, v in g["scalars"].attrs.items()},
                 wall_time_s=float(g.attrs["wall_time_s"]), steps=int(g.attrs["steps"]))
-        snaps = f.get("snapshots", {})
-        for name in sorted(snaps, key=lambda n: snaps[n].attrs["order"]):
-            g = snaps[name]
-            d = {k: g[k][()] for k in g}
-            d.update({k: float(v) for k, v in g.attrs.items() if k != "order"})
-            res.snapshots[name] = d
+        res.snapshots.update(read_snapshots(f))
         return res
+
+
+def write_snapshots(f, snapshots: Dict[str, Dict[str, np.ndarray]]) -> None:
+    """Particle snapshots (stage -> arrays and scalar time) into group `snapshots` of `f`."""
+    for name, snap in snapshots.items():
+        g = f.create_group(f"snapshots/{name}")
+        g.attrs["order"] = list(snapshots).index(name)
+        for k, v in snap.items():
+            if np.ndim(v) == 0:
+                g.attrs[k] = float(v)
+            else:
+                g.create_dataset(k, data=np.asarray(v))
+
+
+def read_snapshots(f) -> Dict[str, Dict[str, np.ndarray]]:
+    """The snapshots written by write_snapshots, in their original order."""
+    out = {}
+    snaps = f.get("snapshots", {})
+    for name in sorted(snaps, key=lambda n: snaps[n].attrs["order"]):
+        g = snaps[name]
+        d = {k: g[k][()] for k in g}
+        d.update({k: float(v) for k, v in g.attrs.items() if k != "order"})
+        out[name] = d
+    return out
 
 
 def _jsonable(v):

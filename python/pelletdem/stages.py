@@ -8,6 +8,7 @@ in the diametral test the plates are planes normal to y, moving towards each oth
 """
 from __future__ import annotations
 
+import contextvars
 import math
 import time
 from dataclasses import dataclass, field, replace
@@ -78,10 +79,26 @@ class _Progress:
             self.bar.close()
 
 
+# A checkpointing run (pelletdem.checkpoint) installs a runner here: every engine run of a stage
+# then goes through it, so it can save between chunks and, on resume, replay a stage up to the
+# run it stopped in. Stage code must therefore read world arrays afresh after a run: a resumed
+# run swaps the engine object under `pellet.world`, and a view taken before it goes stale.
+STAGE_RUNNER: contextvars.ContextVar = contextvars.ContextVar("pelletdem_stage_runner", default=None)
+
+
 def _run(pellet: Pellet, name: str, max_steps: int, progress, **conditions):
+    runner = STAGE_RUNNER.get()
+    if runner is not None:
+        return runner(pellet, name, max_steps, progress, conditions)
+    return run_engine(pellet, name, max_steps, progress, conditions)
+
+
+def run_engine(pellet: Pellet, name: str, max_steps: int, progress, conditions: dict, between=None):
+    """One engine run of a stage with a progress bar named `name`: `max_steps` steps at most,
+    stop `conditions` as World.run_until takes them, `between` its checkpoint hook."""
     bar = _Progress(name, max_steps, progress)
     try:
-        return pellet.world.run_until(max_steps=max_steps, progress=bar, **conditions)
+        return pellet.world.run_until(max_steps=max_steps, progress=bar, between=between, **conditions)
     finally:
         bar.close()
 
