@@ -26,7 +26,7 @@ import numpy as np
 import pytest
 
 CHILD = os.environ.get("PELLETDEM_HOSTILE_CHILD") == "1"
-MAX_EXAMPLES = int(os.environ.get("PELLETDEM_HOSTILE_EXAMPLES", "150"))
+MAX_EXAMPLES = int(os.environ.get("PELLETDEM_HOSTILE_EXAMPLES", "120"))
 ALLOWED = (ValueError, TypeError, RuntimeError)
 
 
@@ -424,7 +424,7 @@ def test_measured_tables_and_variants(n, material, mc, sigma_z):
 
 # --- the command line -------------------------------------------------------------------------------
 
-ARG_WORDS = ["run", "--preset", "tiny", "quick", "paper", "huge", "--out", "o", "--material", "oak", "teak",
+ARG_WORDS = ["run", "loop", "--preset", "tiny", "quick", "paper", "huge", "--out", "o", "--material", "oak", "teak",
              "--mc", "8", "20", "--sigma-z", "60", "120", "--seed", "-1", "0", "1.5", "99999999999999999999",
              "--threads", "0", "1", "2", "1e9", "--particles", "5", "-5", "0", "--quiet", "--restart",
              "--checkpoint-interval", "nan", "inf", "-1", "1e400", "--help-me", "", "--", "-"]
@@ -441,10 +441,12 @@ def test_cli_argv(argv):
     def no_run(*a, **k):
         raise _NoRun
 
-    saved, cwd = pipeline.run_pellet, os.getcwd()
+    from pelletdem import loop_cli
+
+    saved, saved_loop, cwd = pipeline.run_pellet, loop_cli.run, os.getcwd()
     with tempfile.TemporaryDirectory() as d:
         os.chdir(d)
-        pipeline.run_pellet = no_run
+        pipeline.run_pellet = loop_cli.run = no_run  # parsing and checks only, no simulation
         try:
             code = cli.main(argv)
             assert isinstance(code, int)
@@ -453,5 +455,5 @@ def test_cli_argv(argv):
         except _NoRun:
             pass
         finally:
-            pipeline.run_pellet = saved
+            pipeline.run_pellet, loop_cli.run = saved, saved_loop
             os.chdir(cwd)
