@@ -112,6 +112,7 @@ import numpy as np
 
 from ._version import __version__
 from .engine import BondLaw, ParameterError, SimulationError, k1_from_yield_strength
+from .h5io import jsonable
 from .metrics import DEFAULT_REL_SD_FLOOR
 from .presets import Preset, get_preset
 
@@ -399,7 +400,7 @@ class RunCache:
         fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=".json", dir=os.path.dirname(path))
         try:
             with os.fdopen(fd, "w") as fh:
-                json.dump(record, fh, default=_jsonable)
+                json.dump(record, fh, default=jsonable)
             os.replace(tmp, path)
         except BaseException:
             with contextlib.suppress(OSError):
@@ -421,14 +422,6 @@ class RunCache:
 
     def __len__(self) -> int:
         return len(self.keys())
-
-
-def _jsonable(v):
-    if isinstance(v, (np.floating, np.integer, np.bool_)):
-        return v.item()
-    if isinstance(v, np.ndarray):
-        return v.tolist()
-    raise TypeError(f"not JSON-able: {type(v)}")
 
 
 # --------------------------------------------------------------------------------------
@@ -514,7 +507,7 @@ def _save_relaxed(spec: RunSpec, path: str, pellet, outs: dict, curve: dict) -> 
              "mass": pellet.mass, "h0": pellet.h0, "diameter": pellet.diameter, "height": pellet.height,
              "outputs": outs, "curve": curve}
     try:
-        save_world(pellet.world, path, extra=json.loads(json.dumps(extra, default=_jsonable)))
+        save_world(pellet.world, path, extra=json.loads(json.dumps(extra, default=jsonable)))
     except OSError as e:  # a full or read-only disk costs a relaxation later, not this run
         warnings.warn(f"could not save the relaxed pellet to {path}: {e}")
 

@@ -32,7 +32,7 @@ from typing import Optional
 import numpy as np
 
 from .engine import ParameterError, RunOutcome, World
-from .h5io import atomic_h5, open_h5
+from .h5io import atomic_h5, jsonable, open_h5
 
 FORMAT = "pelletdem-checkpoint-1"
 RUN_FORMAT = "pelletdem-run-checkpoint-1"
@@ -58,7 +58,7 @@ def write_state(group, state: dict) -> None:
     """A state dict from World.get_state() into an open HDF5 group (arrays as datasets, plain
     values as attributes, the construction parameters as JSON)."""
     state = dict(state)
-    group.attrs["params"] = json.dumps(state.pop("params"), default=_plain)
+    group.attrs["params"] = json.dumps(state.pop("params"), default=jsonable)
     walls = state.pop("walls")
     samples = state.pop("samples", None)
     wall_samples = state.pop("wall_samples", None)
@@ -69,14 +69,6 @@ def write_state(group, state: dict) -> None:
         _write_flat(group.create_group("samples"), samples)
         for n, wd in enumerate(wall_samples or []):
             _write_flat(group.create_group(f"wall_samples/{n:03d}"), wd)
-
-
-def _plain(v):
-    if isinstance(v, (np.floating, np.integer, np.bool_)):
-        return v.item()
-    if isinstance(v, np.ndarray):
-        return v.tolist()
-    raise TypeError(f"not JSON-able: {type(v).__name__}")
 
 
 def _write_flat(group, values: dict) -> None:
@@ -187,7 +179,7 @@ class RunCheckpoint:
         if math.isnan(interval) or interval < 0:
             raise ParameterError(f"checkpoint interval = {interval} s is out of range: allowed >= 0 s")
         self.path = os.fspath(path)
-        self.run_args = json.loads(json.dumps(run_args, default=_plain))
+        self.run_args = json.loads(json.dumps(run_args, default=jsonable))
         self.interval = interval
         self.n_saved = 0            # checkpoints written by this process
         self._last_save = time.monotonic()

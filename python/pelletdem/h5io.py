@@ -49,3 +49,14 @@ def open_h5(path: str, fmt: str, error: type, what: str):
         f.close()
         raise error(f"{path}: not a {what} (format attribute {found!r}, expected {fmt!r})")
     return f
+
+
+def jsonable(v):
+    """``json.dumps(default=...)`` hook: numpy scalars and arrays as plain Python values."""
+    import numpy as np
+
+    if isinstance(v, (np.floating, np.integer, np.bool_)):
+        return v.item()
+    if isinstance(v, np.ndarray):
+        return v.tolist()
+    raise TypeError(f"not JSON-able: {type(v).__name__}")

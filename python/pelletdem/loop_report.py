@@ -25,6 +25,13 @@ def _plt():
     return plt
 
 
+def _save(plt, fig, path: str) -> str:
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
 def _predictions(data, z) -> np.ndarray:
     return data.values + np.asarray(z) * data.sds
 
@@ -76,10 +83,7 @@ def _fig_fit(res: LoopResult, path: str) -> str:
     for ax in list(axes.flat)[n:]:
         ax.axis("off")
     axes.flat[0].legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _save(plt, fig, path)
 
 
 def _fig_residual(res: LoopResult, path: str) -> str:
@@ -104,10 +108,7 @@ def _fig_residual(res: LoopResult, path: str) -> str:
     a2.axhline(0, color="k", lw=0.5)
     a2.set_xticks(x, parts, rotation=30, fontsize=7)
     a2.set_ylabel("mean z per part")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _save(plt, fig, path)
 
 
 def _fig_ranking(res: LoopResult, path: str) -> str:
@@ -120,10 +121,7 @@ def _fig_ranking(res: LoopResult, path: str) -> str:
     ax.barh(names, vals, color=colors)
     ax.set_xlim(0, 1)
     ax.set_xlabel("fraction of the structured residual explained (first order)")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _save(plt, fig, path)
 
 
 def write_report(res: LoopResult, out_dir: str, title: str = "Discrepancy loop") -> str:
