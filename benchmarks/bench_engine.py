@@ -10,8 +10,10 @@ run times `--steps` steps on 1 and 2 threads, measures peak memory per particle 
 process, times the same bed in LIGGGHTS (Debian package `liggghts`: granular Hooke model with
 friction, same N, radii, stiffness and time step; see liggghts_ref.py), and times the bed
 compacted by a piston to 120 MPa (the costliest state of a pellet's life, with a higher
-coordination number). The last lines are the figures: particle-steps per second, ratios
-against LIGGGHTS per core, the 1 -> 2 thread speed-up, and bytes per particle. Ratios are taken
+coordination number), and a bonded bed (`--bonded-n`, every contact bonded, coordination
+number ~12, see bench_bonds.py) against the same bed unbonded. The last lines are the figures:
+particle-steps per second, ratios against LIGGGHTS per core, the 1 -> 2 thread speed-up, bytes
+per particle, and the bonded/unbonded time per step. Ratios are taken
 against references measured in the same run, since the machine is shared and noisy.
 """
 from __future__ import annotations
@@ -118,6 +120,9 @@ def main(argv=None) -> int:
     ap.add_argument("--no-compacted", action="store_true")
     ap.add_argument("--compacted-sizes", type=int, nargs="+", default=[10000],
                     help="sizes whose compacted state is timed too (compaction is the slow part)")
+    ap.add_argument("--bonded-n", type=int, default=8000,
+                    help="particles of the bonded bed (every contact bonded, CN ~ 12; bench_bonds.py) "
+                         "timed against the same bed unbonded on 1 and 2 threads; 0 skips it")
     ap.add_argument("--memory-worker", type=int, help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
     if a.memory_worker:
@@ -157,6 +162,15 @@ def main(argv=None) -> int:
               f"{lg/1e6:>11.2f} {row['ps_1']/lg:>13.2f} {row['bytes_per_particle']:>10.0f} "
               f"{row.get('compacted_cn', float('nan')):>12.2f} {row.get('compacted_ps_1', float('nan'))/1e6:>8.2f} "
               f"{row.get('compacted_ps_2', float('nan'))/1e6:>8.2f}")
+    if a.bonded_n > 0:
+        # The bonded bed against the same bed unbonded, timed alternately in this run: the last
+        # lines give the bonded/unbonded time per step (target < 1.5).
+        print()
+        print(f"# bonded bed of {a.bonded_n} (benchmarks/bench_bonds.py)", flush=True)
+        sys.path.insert(0, HERE)
+        import bench_bonds
+
+        bench_bonds.main(["--n", str(a.bonded_n), "--steps", str(a.steps), "--threads", "1,2"])
     return 0
 
 
