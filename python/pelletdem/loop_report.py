@@ -39,7 +39,8 @@ def _predictions(data, z) -> np.ndarray:
 def _curves(data) -> Dict[str, List[int]]:
     out: Dict[str, List[int]] = {}
     for i, o in enumerate(data.observations):
-        key = o.curve or f"{o.condition.label} {o.quantity}"
+        # scalars of one quantity share a panel, one tick per condition
+        key = o.curve or o.quantity
         out.setdefault(key, []).append(i)
     return out
 
@@ -57,7 +58,7 @@ def _fig_fit(res: LoopResult, path: str) -> str:
     n = len(panels)
     cols = min(3, n)
     rows = (n + cols - 1) // cols
-    fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 3.2 * rows), squeeze=False)
+    fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 3.6 * rows), squeeze=False)
     for ax, (title, data, idx, pb, pa) in zip(axes.flat, panels):
         obs = [data.observations[i] for i in idx]
         q = obs[0].quantity
@@ -69,14 +70,18 @@ def _fig_fit(res: LoopResult, path: str) -> str:
             obs = [obs[k] for k in order]
             x = np.array([o.x for o in obs])
             xl = "dL/D" if q == "sigma_1" else "dh/h0"
+            style = "-"
         else:
             x = np.arange(len(obs), dtype=float)
             xl = ""
+            ax.set_xticks(x, [o.condition.label for o in obs], rotation=60, ha="right", fontsize=6)
+            style = "s"  # one value per condition: markers, not a line between conditions
         ax.errorbar(x, [o.value * scale for o in obs], yerr=[o.effective_sd * scale for o in obs], fmt="o",
                     ms=3, color="k", label="measured")
-        ax.plot(x, pb[idx] * scale, "-", color="tab:red", label="baseline")
+        ax.plot(x, pb[idx] * scale, style, ms=4, mfc="none", color="tab:red", label="baseline")
         if res.chosen is not None:
-            ax.plot(x, pa[idx] * scale, "-", color="tab:blue", label=f"+ {res.chosen}")
+            ax.plot(x, pa[idx] * scale, style.replace("s", "^"), ms=4, mfc="none", color="tab:blue",
+                    label=f"+ {res.chosen}")
         ax.set_title(title, fontsize=8)
         ax.set_xlabel(xl)
         ax.set_ylabel(f"{q} [{'MPa' if unit == 'Pa' else unit}]")
