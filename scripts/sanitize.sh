@@ -24,5 +24,7 @@ export LD_PRELOAD="$(g++ -print-file-name=libasan.so):$(g++ -print-file-name=lib
 # by tests/test_memory.py in the normal build (it skips itself under ASan).
 export ASAN_OPTIONS=detect_leaks=0:abort_on_error=1
 export UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1
+# A notebook cell may take ten times its usual time here.
+export PELLETDEM_NOTEBOOK_CELL_TIMEOUT=${PELLETDEM_NOTEBOOK_CELL_TIMEOUT:-9000}
 python3 -c "import pelletdem._core as c; assert c.__file__.startswith('$prefix'), c.__file__"
 python3 -m pytest -q -p no:cacheprovider "$@"
