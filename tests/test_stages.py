@@ -228,6 +228,36 @@ def test_relax_reports_what_the_snapshot_shows(life):
         < _stage(life, "compact").scalars["bulk_density_max"]
 
 
+def test_relaxation_is_damped_and_the_law_is_restored_for_bonding(life):
+    # Demould and relax release the pellet's stored energy; the release damping lets the
+    # relaxation end on its kinetic-energy test, and the bonds and plates see the law itself.
+    assert life.pellet.preset.release_damping_ratio > 0.0
+    assert _stage(life, "relax").scalars["converged"] == 1.0
+    assert life.pellet.world.contact_law.normal_damping_ratio == life.pellet.preset.contact.normal_damping_ratio
+
+
+def test_main_piece_leaves_out_shed_particles():
+    # Three touching spheres in a row and one far off: the pellet is the three.
+    w = pelletdem.World(dt=1e-6, box=((-0.01, -0.01, -0.01), (0.01, 0.01, 0.01)), gravity=(0, 0, 0))
+    r = 2e-4
+    x = np.array([[0.0, 0.0, 0.0], [1.9 * r, 0.0, 0.0], [3.8 * r, 0.0, 0.0], [0.008, 0.0, 0.0]])
+    w.add_particles(x, np.full(4, r))
+    w.run(1)  # contacts are found by a force evaluation
+    mask = stages.main_piece(w)
+    assert mask.tolist() == [True, True, True, False]
+    d, h, cx, cy = stages.pellet_extent(w, mask)
+    assert cx == pytest.approx(1.9 * r, rel=1e-4) and cy == pytest.approx(0.0, abs=1e-12)
+    assert d == pytest.approx(2.0 * (1.9 * r + r), rel=1e-4)
+    assert h == pytest.approx(2.0 * r, rel=1e-4)
+    assert stages.pellet_extent(w)[0] > 0.01  # every particle: the shed one sets the width
+
+
+@pytest.mark.parametrize("value", [-0.1, 1.5, float("nan"), "0.3"])
+def test_release_damping_ratio_is_checked(value):
+    with pytest.raises(ParameterError, match="release_damping_ratio"):
+        get_preset("tiny").with_(release_damping_ratio=value)
+
+
 # --- bond ------------------------------------------------------------------------------------
 
 def test_bonded_pellet_is_one_piece(life):

@@ -17,7 +17,10 @@ class Preset:
     (the laboratory's 3.3e-5 m/s is out of reach, see README "Quasi-static control").
     fill_solid_fraction: solid fraction of the random-placement region (-). fill_gravity_factor:
     gravity is raised by this factor while the bed settles (-). ke_threshold: relaxation ends
-    when the kinetic energy (scaled mass) falls below it, J. relax_max_time: the relaxation's
+    when the kinetic energy (scaled mass) falls below it, J. release_damping_ratio: viscous
+    normal damping (fraction of critical) switched on for demould and relax only, so the
+    pellet's stored elastic energy leaves it as heat instead of as vibrations and ejected
+    particles (-). relax_max_time: the relaxation's
     time limit, s. bond_ramp_time: adhesion goes from full to zero over it, s. max_dLD: the
     diametral test ends at this dL/D (-). sample_points: samples recorded per stage.
     max_overlap_ratio: the engine's guard on overlap / radius (-). contact: the ContactLaw.
@@ -41,6 +44,7 @@ class Preset:
     fill_solid_fraction: float = 0.25
     fill_gravity_factor: float = 1.0e4
     ke_threshold: float = 1.0e-8
+    release_damping_ratio: float = 0.3
     relax_max_time: float = 0.05
     bond_ramp_time: float = 0.004
     max_dLD: float = 0.1
@@ -50,6 +54,12 @@ class Preset:
     # guard only catches a run that has gone wrong.
     max_overlap_ratio: float = 1.5
     contact: ContactLaw = field(default_factory=ContactLaw)
+
+    def __post_init__(self):
+        r = self.release_damping_ratio
+        if not (isinstance(r, (int, float)) and 0.0 <= r <= 1.0):
+            raise ParameterError(f"release_damping_ratio = {r!r} is out of range: allowed 0 <= "
+                                 "release_damping_ratio <= 1 (fraction of critical damping)")
 
     def with_(self, **changes) -> "Preset":
         """A copy with some fields changed (e.g. halved speeds for a quasi-static check)."""
