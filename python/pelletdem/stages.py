@@ -123,21 +123,25 @@ def check_sigma_z(sigma_z) -> float:
     return v
 
 
-def main_piece(world: World) -> np.ndarray:
-    """Boolean mask of the particles in the largest group connected by contacts or intact
-    bonds: the pellet, without loose particles it may have shed."""
+def _largest_group(n: int, i: np.ndarray, j: np.ndarray) -> np.ndarray:
+    """Boolean mask of the largest group of the n particles connected through pairs (i, j)."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
-    n = world.n
-    c, b = world.contacts(), world.bonds()
-    intact = b["mode"] == 0
-    i = np.concatenate([c["i"], b["i"][intact]]).astype(np.int64)
-    j = np.concatenate([c["j"], b["j"][intact]]).astype(np.int64)
     if n == 0:
         return np.zeros(0, dtype=bool)
     _, labels = connected_components(coo_matrix((np.ones(len(i)), (i, j)), shape=(n, n)), directed=False)
     return labels == np.argmax(np.bincount(labels))
+
+
+def main_piece(world: World) -> np.ndarray:
+    """Boolean mask of the particles in the largest group connected by contacts or intact
+    bonds: the pellet, without loose particles it may have shed."""
+    c, b = world.contacts(), world.bonds()
+    intact = b["mode"] == 0
+    i = np.concatenate([c["i"], b["i"][intact]]).astype(np.int64)
+    j = np.concatenate([c["j"], b["j"][intact]]).astype(np.int64)
+    return _largest_group(world.n, i, j)
 
 
 def pellet_extent(world: World, mask: Optional[np.ndarray] = None) -> tuple:
@@ -399,14 +403,7 @@ def relax(pellet: Pellet, ke_threshold: Optional[float] = None, max_time: Option
 
 def largest_cluster_fraction(n: int, i: np.ndarray, j: np.ndarray) -> float:
     """Fraction of the n particles in the largest group connected through the pairs (i, j)."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
-    if n == 0:
-        return 0.0
-    g = coo_matrix((np.ones(len(i)), (i, j)), shape=(n, n))
-    _, labels = connected_components(g, directed=False)
-    return float(np.bincount(labels).max() / n)
+    return float(_largest_group(n, i, j).sum() / n) if n > 0 else 0.0
 
 
 def bond(pellet: Pellet, law: BondLaw, ramp_time: Optional[float] = None,
