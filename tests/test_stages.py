@@ -332,10 +332,17 @@ def test_broken_bonds_lie_near_the_loaded_diameter(life):
     # A uniform spread would put 38 % in the band of width 0.3 D along the loaded diameter.
     assert frac["fraction"] > 0.5
     assert frac["concentration"] > 1.5
-    # Across the other diameter (not loaded) there is no such concentration.
+    # The cracks run along the loaded diameter (x = x_c, from plate to plate): the broken bonds
+    # lie closer to that line than to the other diameter. (Counting them in a band along each
+    # diameter cannot tell the two apart when the cracks gather at the centre, where the bands
+    # cross, as they do in a 400-particle pellet.)
     other = cracks.broken_fraction_by_region(st.series, snap["position"], snap["radius"],
                                              loaded_axis="x", band=0.3)
-    assert other["fraction"] < frac["fraction"]
+    assert other["fraction"] <= frac["fraction"]
+    pos = np.asarray(st.series["broken_position"])
+    x, r = snap["position"], snap["radius"]
+    _, _, cx, cy = _extent(x, r)
+    assert np.abs(pos[:, 0] - cx).mean() < np.abs(pos[:, 1] - cy).mean()
 
 
 # --- bad parameters: named errors before any work ----------------------------------------------
