@@ -18,9 +18,9 @@ class Preset:
     fill_solid_fraction: solid fraction of the random-placement region (-). fill_gravity_factor:
     gravity is raised by this factor while the bed settles (-). ke_threshold: relaxation ends
     when the kinetic energy (scaled mass) falls below it, J. release_damping_ratio: viscous
-    normal damping (fraction of critical) switched on for demould and relax only, so the
-    pellet's stored elastic energy leaves it as heat instead of as vibrations and ejected
-    particles (-). relax_max_time: the relaxation's
+    normal damping (fraction of critical) on the pairs and the floor during relax only, so the
+    energy released at unloading and demoulding leaves the pellet as heat instead of as
+    vibrations (-). relax_max_time: the relaxation's
     time limit, s. bond_ramp_time: adhesion goes from full to zero over it, s. max_dLD: the
     diametral test ends at this dL/D (-). sample_points: samples recorded per stage.
     max_overlap_ratio: the engine's guard on overlap / radius (-). contact: the ContactLaw.

@@ -366,7 +366,8 @@ def relax(pellet: Pellet, ke_threshold: Optional[float] = None, max_time: Option
     The elastic energy released at unloading can lift the pellet off the floor, and under the
     scaled gravity it then floats at a few mm/s; that motion is not the pellet relaxing, so
     the test uses the internal kinetic energy, and the drift is removed at the end (the pellet
-    is picked up and laid between the plates). Reports the relaxed pellet's height and diameter (m), bulk density (kg/m^3, unscaled mass),
+    is picked up and laid between the plates). The preset's release_damping_ratio damps the
+    pair and floor contacts meanwhile (the bond stage switches it off). Reports the relaxed pellet's height and diameter (m), bulk density (kg/m^3, unscaled mass),
     and coordination number. `max_time` (s) bounds the stage; `converged` says which ended it.
     """
     t0 = time.perf_counter()
