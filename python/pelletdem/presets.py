@@ -20,8 +20,8 @@ class Preset:
     when the kinetic energy (scaled mass) falls below it, J. release_damping_ratio: viscous
     normal damping (fraction of critical) on the pairs and the floor during relax only, so the
     energy released at unloading and demoulding leaves the pellet as heat instead of as
-    vibrations (-). relax_max_time: the relaxation's
-    time limit, s. bond_ramp_time: adhesion goes from full to zero over it, s. max_dLD: the
+    vibrations (-). relax_min_time: the relaxation runs at least this long before its
+    kinetic-energy test, s. relax_max_time: the relaxation's time limit, s. bond_ramp_time: adhesion goes from full to zero over it, s. max_dLD: the
     diametral test ends at this dL/D (-). sample_points: samples recorded per stage.
     max_overlap_ratio: the engine's guard on overlap / radius (-). contact: the ContactLaw.
     Every field with its default and source: docs/parameters.md.
@@ -45,6 +45,7 @@ class Preset:
     fill_gravity_factor: float = 1.0e4
     ke_threshold: float = 1.0e-8
     release_damping_ratio: float = 0.3
+    relax_min_time: float = 0.005
     relax_max_time: float = 0.05
     bond_ramp_time: float = 0.004
     max_dLD: float = 0.1
