@@ -10,7 +10,7 @@ and 3), fig15_measured_vs_simulated.png and fig15_curves.png (each variant's fit
 sigma_1(dL/D) with Table 3's point). Runs are cached in OUT_DIR/cache: run again to resume.
 
 Size knob: PRESET and MAX_RUNS below. "tiny" with 4 runs per variant takes a few minutes on
-two cores; the full study is --preset paper --max-runs 8 (days on a workstation, or give
+two cores; the full study is --preset paper --max-runs 8 (~9 h on two cores, estimated, or give
 calibrate_variants a Dask distributed.Client).
 """
 import argparse
@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-PRESET = "tiny"      # "tiny" (minutes), "quick" (hours), "paper" (the paper's size, days)
+PRESET = "tiny"      # "tiny" (minutes), "quick" (~20 min), "paper" (the paper's size, ~9 h)
 MAX_RUNS = 4         # parameter points per variant fit
 COMPACTION_RUNS = 2  # k1 points of the shared compaction fit (0: keep Table 4's k1)
 MPA = 1e6
