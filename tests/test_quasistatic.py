@@ -8,7 +8,11 @@ than 5 %. The bonds are the paper's Table 5 oak ones (MC 8 %, 120 MPa: E_b = 120
 sigma_c = tau_c = 36 MPa), with which the quick pellet peaks near dL/D = 0.1; the test runs
 on to dL/D = 0.15 so the peak is inside it.
 
-Slow (two quick pellets on one thread, the second at half speed: ~10 min): `pytest -m slow`.
+One pellet's peak also moves by several per cent with nothing but the packing changed (the
+breakage is chaotic: see the README's reproducibility figures), so the test compares the mean
+sigma_f over two packing seeds at each speed.
+
+Slow (four quick pellets on one thread, two at half speed: ~8 min): `pytest -m slow`.
 """
 from __future__ import annotations
 
@@ -24,10 +28,13 @@ SPEEDS = ("piston_speed", "unload_speed", "demould_rate", "plate_speed")
 MAX_DLD = 0.15
 
 
-def _sigma_f(preset):
+SEEDS = (0, 1)
+
+
+def _sigma_f(preset, seed):
     t0 = time.perf_counter()
     law = pipeline.bond_law_for("oak", 8, 120)
-    res = pipeline.run_pellet(preset, material="oak", mc=8, sigma_z_mpa=120, seed=0, threads=1,
+    res = pipeline.run_pellet(preset, material="oak", mc=8, sigma_z_mpa=120, seed=seed, threads=1,
                               bond_law=law, progress=False)
     s = res.stages["diametral"].series
     k = int(np.argmax(s["sigma_1"]))
@@ -41,11 +48,15 @@ def _sigma_f(preset):
 def test_sigma_f_does_not_depend_on_the_loading_speed():
     base = get_preset("quick").with_(max_dLD=MAX_DLD)
     half = base.with_(**{name: 0.5 * getattr(base, name) for name in SPEEDS})
-    r1, t1 = _sigma_f(base)
-    r2, t2 = _sigma_f(half)
-    f1, f2 = r1.scalar("diametral", "sigma_f"), r2.scalar("diametral", "sigma_f")
-    change = abs(f2 - f1) / f1
-    print(f"\nsigma_f {f1 / 1e6:.4f} MPa at the preset's speeds ({t1:.0f} s), {f2 / 1e6:.4f} MPa at "
-          f"half ({t2:.0f} s): change {100 * change:.1f} %; relaxed bulk density "
-          f"{r1.scalar('relax', 'bulk_density'):.1f} / {r2.scalar('relax', 'bulk_density'):.1f} kg/m^3")
+    f1, f2 = [], []
+    for seed in SEEDS:
+        r1, t1 = _sigma_f(base, seed)
+        r2, t2 = _sigma_f(half, seed)
+        f1.append(r1.scalar("diametral", "sigma_f"))
+        f2.append(r2.scalar("diametral", "sigma_f"))
+        print(f"\nseed {seed}: sigma_f {f1[-1] / 1e6:.4f} MPa at the preset's speeds ({t1:.0f} s), "
+              f"{f2[-1] / 1e6:.4f} MPa at half ({t2:.0f} s); relaxed bulk density "
+              f"{r1.scalar('relax', 'bulk_density'):.1f} / {r2.scalar('relax', 'bulk_density'):.1f} kg/m^3")
+    change = abs(np.mean(f2) - np.mean(f1)) / np.mean(f1)
+    print(f"mean sigma_f {np.mean(f1) / 1e6:.4f} -> {np.mean(f2) / 1e6:.4f} MPa: change {100 * change:.1f} %")
     assert change < 0.05
