@@ -21,8 +21,9 @@ class Preset:
     normal damping (fraction of critical) on the pairs and the floor during relax only, so the
     energy released at unloading and demoulding leaves the pellet as heat instead of as
     vibrations (-). relax_min_time: the relaxation runs at least this long before its
-    kinetic-energy test, s. relax_max_time: the relaxation's time limit, s. bond_ramp_time: adhesion goes from full to zero over it, s. max_dLD: the
-    diametral test ends at this dL/D (-). sample_points: samples recorded per stage.
+    kinetic-energy test, s. relax_max_time: the relaxation's time limit, s. bond_ramp_time:
+    adhesion goes from full to zero over it, s. max_dLD: the diametral test ends at this
+    dL/D (-). sample_points: samples recorded per stage.
     max_overlap_ratio: the engine's guard on overlap / radius (-). contact: the ContactLaw.
     Every field with its default and source: docs/parameters.md.
     """
