@@ -164,8 +164,8 @@ def calm(world) -> float:
     withdraws at our accelerated speed drags the springing-back pellet with it, and with the
     scaled mass the pellet keeps up to M v^2 / 6 of kinetic energy when the wall lets go
     (1.4e-2 J on a 40,000-particle pellet unloaded at 0.1 m/s, six orders above the
-    relaxation threshold); in the laboratory, at 3.3e-5 m/s and the true mass, it is nil. Positions,
-    and with them the stored elastic energy, are untouched.
+    relaxation threshold); in the laboratory, at 3.3e-5 m/s and the true mass, it is nil.
+    Positions, and with them the stored elastic energy, are untouched.
     """
     e = float(world.kinetic_energy())
     zero = np.zeros((world.n, 3))
@@ -395,8 +395,9 @@ def relax(pellet: Pellet, ke_threshold: Optional[float] = None, max_time: Option
     scaled gravity it then floats at a few mm/s; that motion is not the pellet relaxing, so
     the test uses the internal kinetic energy, and the drift is removed at the end (the pellet
     is picked up and laid between the plates). The preset's release_damping_ratio damps the
-    pair and floor contacts meanwhile (the bond stage switches it off). Reports the relaxed pellet's height and diameter (m), bulk density (kg/m^3, unscaled mass),
-    and coordination number. The test starts after `min_time` (s): the release stages leave
+    pair and floor contacts meanwhile (the bond stage switches it off). Reports the relaxed
+    pellet's height and diameter (m), bulk density (kg/m^3, unscaled mass) and coordination
+    number. The test starts after `min_time` (s): the release stages leave
     the pellet at rest (:func:`calm`) but not yet in balance, and its stress waves need a few
     passes to settle. `max_time` (s) bounds the stage; `converged` says which ended it.
     """
