@@ -92,6 +92,26 @@ def test_loop_says_so_when_the_effect_is_outside_its_library():
     assert res.verdict == "no candidate explains this residual"
 
 
+def test_candidates_that_explain_equally_are_refitted_cheapest_first():
+    # The same toe shift under two names: one said to act in compaction (new pellets per
+    # strength), listed first, and one in the diametral test. Their signatures are identical,
+    # so with one refit the cheaper, diametral one must be the one refitted.
+    toe = TOY_LIBRARY["toe"]
+    twin = Effect("toe_in_compaction", toe.param, toe.unit, toe.lo, toe.hi, toe.probe, toe.log,
+                  toe.off, "compaction", toe.description, toe.signature)
+    sim = FunctionSimulator(toy)
+    data = loop.synthetic_dataset(sim, {**TRUTH, "contact.plate_yield_stress": 0.5}, FIT + HELD,
+                                  noise=0.02, points=14, quantities=("sigma_1", "sigma_f", "dLf_D"), seed=1)
+    res = loop.close_loop(sim, data, BOUNDS, START, held_out=lambda c: c in HELD,
+                          library={twin.name: twin, "toe": toe}, fd_step=0.01, max_iter=10,
+                          refit_iter=10, refit_top=1)
+    first, second = res.candidates[:2]
+    assert round(first.explained, 2) == round(second.explained, 2) > 0.05
+    assert first.effect.name == "toe" and first.fit is not None
+    assert second.fit is None  # not refitted
+    assert res.chosen == "toe", res.verdict
+
+
 def test_loop_refuses_a_split_without_held_out_data():
     sim = FunctionSimulator(toy)
     data = loop.synthetic_dataset(sim, TRUTH, FIT, noise=0.02)

@@ -21,7 +21,9 @@ The procedure (:func:`close_loop`):
    projected on the part of each signature that the base parameters cannot mimic; the
    squared cosine of that angle is the fraction of the structured residual the effect can
    explain to first order. An effect whose best strength would be negative while it only
-   works one way explains nothing. Candidates are ranked by that fraction.
+   works one way explains nothing. Candidates are ranked by that fraction (to two digits);
+   among equals, effects of the diametral test come before compaction effects, since they
+   branch off the cached relaxed pellets and cost a fraction of a refit that needs new ones.
 4. **Refit and choose.** The best ``refit_top`` candidates (explaining at least
    ``min_explained``) are refitted with their parameter free, starting from the best point of
    a profile over the effect's strength (``profile_points`` values across its bounds, each
@@ -853,7 +855,10 @@ def close_loop(sim: Simulator, data: Dataset, base_bounds: Mapping[str, Sequence
             if a <= 0 and eff.off == 0.0 and eff.lo >= 0:
                 frac, why = 0.0, "its signature points the other way"
             candidates.append(Candidate(eff, frac, strength, sig, why=why))
-        candidates.sort(key=lambda c: -c.explained)
+        # Ranked by the fraction explained as printed (two digits); candidates tied there are
+        # refitted cheapest first: a 'diametral' effect branches off the cached relaxed
+        # pellets, a 'compaction' one needs new pellets for every strength it tries.
+        candidates.sort(key=lambda c: (-round(c.explained, 2), c.effect.stage != "diametral"))
         say("candidate signatures (fraction of the structured residual explained to first order):")
         for c in candidates:
             say(f"  {c.effect.name:>20}: {c.explained:.2f}  {c.why}")

@@ -524,6 +524,11 @@ def diametral(pellet: Pellet, speed: Optional[float] = None, max_dLD: Optional[f
     _sample_every(pellet, max_steps)
     n_broken0 = len(w.broken_bonds()["i"])
     out = _run(pellet, "diametral", max_steps + 10, progress, load_marker_above=marker0 + target)
+    t_sampled = w.samples()["time"]
+    if not len(t_sampled) or t_sampled[-1] < w.time:
+        # The series must end where the test ended: bonds broken after the last periodic
+        # sample would otherwise be missing from n_bonds_broken.
+        w.record_sample()
     w.set_wall_velocity(lo, (0.0, 0.0, 0.0))
     w.set_wall_velocity(hi, (0.0, 0.0, 0.0))
     sl, sh, g = w.wall_samples(lo), w.wall_samples(hi), w.samples()
