@@ -480,7 +480,8 @@ def diametral(pellet: Pellet, speed: Optional[float] = None, max_dLD: Optional[f
 
     Both plates move towards each other at speed/2 (m/s) so the pellet stays centred; dL is
     their approach. Records sigma_1 = P / (pi R_p h_p) (eq. 4, Pa) against dL/D, the tensile
-    strength sigma_f (the peak, Pa), dL_f/D, and broken bonds against dL/D.
+    strength sigma_f (the peak, Pa), dL_f/D, and broken bonds against dL/D; the series end
+    at the step where the test stops.
     """
     t0 = time.perf_counter()
     v = _check_positive("speed", pellet.preset.plate_speed if speed is None else speed, "m/s")
