@@ -8,6 +8,7 @@ library. The slow tests do the same with the C++ engine on the 'tiny' pellet (se
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -97,8 +98,7 @@ def test_candidates_that_explain_equally_are_refitted_cheapest_first():
     # strength), listed first, and one in the diametral test. Their signatures are identical,
     # so with one refit the cheaper, diametral one must be the one refitted.
     toe = TOY_LIBRARY["toe"]
-    twin = Effect("toe_in_compaction", toe.param, toe.unit, toe.lo, toe.hi, toe.probe, toe.log,
-                  toe.off, "compaction", toe.description, toe.signature)
+    twin = dataclasses.replace(toe, name="toe_in_compaction", stage="compaction")
     sim = FunctionSimulator(toy)
     data = loop.synthetic_dataset(sim, {**TRUTH, "contact.plate_yield_stress": 0.5}, FIT + HELD,
                                   noise=0.02, points=14, quantities=("sigma_1", "sigma_f", "dLf_D"), seed=1)

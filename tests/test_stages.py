@@ -349,6 +349,9 @@ def test_bonds_break_during_the_diametral_test(life):
     assert set(np.unique(s["broken_mode"])) <= {1, 2}  # tension, shear
     assert np.all(np.diff(s["n_bonds_broken"]) >= 0)
     assert s["n_bonds_broken"][-1] == nb
+    # The series end where the test stopped: at max_dLD, after every breakage.
+    assert s["dL_D"][-1] >= life.max_dLD - 1e-9
+    assert s["time"][-1] >= s["broken_time"].max()
     assert np.all(np.diff(s["broken_time"]) >= 0)
     assert np.all((s["broken_dL_D"] >= 0) & (s["broken_dL_D"] <= life.max_dLD + 1e-3))
     assert sc["bonds_intact"] + sc["bonds_broken"] + bond.scalars["broken_during_ramp"] == bond.scalars["n_bonds"]
