@@ -173,6 +173,14 @@ def test_unload_releases_the_piston(life):
     # The pellet springs back: the piston leaves it higher than at the end of compaction.
     assert sc["h_at_release"] > _stage(life, "compact").scalars["h_min"]
     assert np.all(np.diff(s["h"]) >= 0)  # the piston only goes up
+    # h_at_release is the piston's height when it let go: the piston moves at constant speed
+    # through the stage, so its sampled path interpolates to it exactly; the series go on
+    # past it (the piston is lifted clear) and end where the stage ended.
+    t_rel = sc["time_at_release"]
+    assert s["time"][0] <= t_rel < s["time"][-1]
+    assert np.interp(t_rel, s["time"], s["h"]) == pytest.approx(sc["h_at_release"], rel=1e-9)
+    assert s["h"][-1] > sc["h_at_release"]
+    assert s["time"][-1] == pellet.snapshots["unload"]["time"]
     # The piston is switched off, and it is above every particle.
     state = pellet.world.wall_state(pellet.walls["piston"])
     assert state["active"] is False
@@ -219,6 +227,9 @@ def test_demould_removes_the_mould(life):
     assert r0 + 4.0 * rmax <= st.scalars["final_radius"] <= r0 + 4.0 * rmax + step * (1 + 1e-6)
     rad = st.series["radius"]
     assert np.all(np.diff(rad) >= 0)
+    # The series end where the stage ended, with the mould at its final radius.
+    assert st.series["time"][-1] == pellet.snapshots["demould"]["time"]
+    assert rad[-1] == st.scalars["final_radius"]
     # The unloaded pellet still pressed on the mould (residual radial stress); the grown mould
     # no longer touches it.
     assert _stage(life, "unload").series["mould_radial_force"][-1] > 0.0
@@ -304,7 +315,11 @@ def test_bonded_pellet_is_one_piece(life):
     assert sc["bonds_per_particle"] == pytest.approx(2.0 * sc["n_bonds"] / n)
     # Taking the adhesion away breaks (almost) nothing and keeps the shape.
     assert sc["broken_during_ramp"] <= 0.02 * sc["n_bonds"]
-    assert np.all(np.diff(_stage(life, "bond").series["n_bonds_intact"]) <= 0)
+    series = _stage(life, "bond").series
+    assert np.all(np.diff(series["n_bonds_intact"]) <= 0)
+    # The series end where the stage ended, with the bonds left intact then.
+    assert series["time"][-1] == life.pellet.snapshots["bond"]["time"]
+    assert series["n_bonds_intact"][-1] == sc["n_bonds"] - sc["broken_during_ramp"]
     assert sc["diameter"] == pytest.approx(_stage(life, "relax").scalars["diameter"], rel=0.02)
     assert sc["height"] == pytest.approx(_stage(life, "relax").scalars["height"], rel=0.02)
     assert life.result.params["bond"]["youngs_modulus"] == life.bond_law.youngs_modulus

@@ -109,6 +109,15 @@ def _sample_every(pellet: Pellet, expected_steps: float) -> None:
     pellet.world.clear_samples()
 
 
+def _close_series(w) -> None:
+    """Record one more sample where a stage stops, unless the last periodic one fell there:
+    a stage's series end at its end (bonds broken, or a wall moved, after the last periodic
+    sample would otherwise be missing)."""
+    t = w.samples()["time"]
+    if not len(t) or t[-1] < w.time:
+        w.record_sample()
+
+
 def _check_positive(name: str, value: float, unit: str) -> float:
     if not (isinstance(value, (int, float, np.floating)) and math.isfinite(value) and value > 0):
         raise ParameterError(f"{name} = {value!r} {unit} must be a finite number > 0")
@@ -323,8 +332,8 @@ def unload(pellet: Pellet, speed: Optional[float] = None, progress: Optional[boo
 
     When the piston lets go, the pellet's velocities are set to zero (:func:`calm`): the
     kinetic energy it carried from following the fast piston is an artefact of the
-    accelerated, mass-scaled unloading. Reports the height at release (m) and the kinetic
-    energy removed (J, scaled mass)."""
+    accelerated, mass-scaled unloading. Reports the piston's height above the floor when it
+    let go (m) and that time (s), and the kinetic energy removed (J, scaled mass)."""
     t0 = time.perf_counter()
     v = _check_positive("speed", pellet.preset.unload_speed if speed is None else speed, "m/s")
     w, pid = pellet.world, pellet.walls["piston"]
@@ -336,15 +345,18 @@ def unload(pellet: Pellet, speed: Optional[float] = None, progress: Optional[boo
     # the piston keeps an exact zero from ever being reached).
     f_peak = max(w.wall_state(pid)["normal_force"], 0.0)
     out = _run(pellet, "unload", max_steps, progress, wall_force_below=(pid, 1e-4 * f_peak))
+    # The piston's height (above the floor at z = 0) and the time when it let go.
+    h_release, t_release = float(w.wall_state(pid)["point"][2]), float(w.time)
     calmed = calm(w)
     # Adhesion can hold the piston a little longer; lift it clear by two radii.
     clear = int(2.0 * pellet.preset.radius_max / (v * w.dt)) + 1
     out2 = _run(pellet, "unload (clear)", clear, progress)
+    _close_series(w)
     w.set_wall_velocity(pid, (0.0, 0.0, 0.0))
     w.set_wall_active(pid, False)
     s = _piston_series(pellet)
     pellet.snapshot("unload")
-    return StageResult("unload", series=s, scalars={"h_at_release": float(s["h"][-1]),
+    return StageResult("unload", series=s, scalars={"h_at_release": h_release, "time_at_release": t_release,
                                                     "released": float(out.reason == "wall_force_below"),
                                                     "kinetic_energy_removed": calmed},
                        wall_time_s=time.perf_counter() - t0, steps=out.steps + out2.steps)
@@ -373,6 +385,7 @@ def demould(pellet: Pellet, rate: Optional[float] = None, progress: Optional[boo
     calmed = calm(w)
     clear = int(4.0 * pellet.preset.radius_max / (rate * w.dt)) + 1
     out2 = _run(pellet, "demould (clear)", clear, progress)
+    _close_series(w)
     w.set_wall_radius_rate(mid, 0.0)
     w.set_wall_active(mid, False)
     ms = w.wall_samples(mid)
@@ -458,6 +471,7 @@ def bond(pellet: Pellet, law: BondLaw, ramp_time: Optional[float] = None,
     steps = int(2.0 * tr / w.dt) + 1
     _sample_every(pellet, steps)
     out = _run(pellet, "bond", steps, progress)
+    _close_series(w)
     b = w.bonds()
     intact = b["mode"] == 0
     frac = largest_cluster_fraction(w.n, b["i"][intact], b["j"][intact])
@@ -525,11 +539,7 @@ def diametral(pellet: Pellet, speed: Optional[float] = None, max_dLD: Optional[f
     _sample_every(pellet, max_steps)
     n_broken0 = len(w.broken_bonds()["i"])
     out = _run(pellet, "diametral", max_steps + 10, progress, load_marker_above=marker0 + target)
-    t_sampled = w.samples()["time"]
-    if not len(t_sampled) or t_sampled[-1] < w.time:
-        # The series must end where the test ended: bonds broken after the last periodic
-        # sample would otherwise be missing from n_bonds_broken.
-        w.record_sample()
+    _close_series(w)
     w.set_wall_velocity(lo, (0.0, 0.0, 0.0))
     w.set_wall_velocity(hi, (0.0, 0.0, 0.0))
     sl, sh, g = w.wall_samples(lo), w.wall_samples(hi), w.samples()
