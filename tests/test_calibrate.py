@@ -6,6 +6,7 @@ density as power laws of the parameters, exponents deliberately off the paper's 
 so the machinery is tested in milliseconds; `test_recovers_sigma_c_on_tiny_pellet` and
 `test_dask_local_cluster_runs_engine` run the real engine on the 'tiny' pellet.
 """
+import json
 import math
 import os
 import subprocess
@@ -407,6 +408,35 @@ def test_calibrate_variants_machinery(tmp_path):
                                 executor="serial", runner=power_law_runner, max_runs=6)
     assert rep2.n_simulations == 0
     assert rep2.table["E_b_mpa"].tolist() == pytest.approx(t["E_b_mpa"].tolist())
+
+
+def test_calibrate_variants_transfers_a_contact_law_and_warm_starts(tmp_path):
+    # A calibration on one preset hands its k1 and bond fits to another: every run of the
+    # second uses that k1 (no compaction fit), and starting at the first's bond parameters
+    # needs fewer runs than starting at Table 5's.
+    vs = [("oak", 8, 120), ("pine", 20, 60)]
+    first = C.calibrate_variants(vs, "tiny", executor="serial", runner=power_law_runner, max_runs=8)
+    k1 = first.contact["k1"]
+    assert first.bond_start().keys() == first.fits.keys()
+    CALLS.clear()
+    cold = C.calibrate_variants(vs, "quick", compaction=None, contact=first.contact, executor="serial",
+                                runner=power_law_runner, max_runs=8)
+    runs_cold = len(CALLS)
+    assert cold.compaction is None and cold.contact == first.contact
+    CALLS.clear()
+    warm = C.calibrate_variants(vs, "quick", compaction=None, contact=first.contact,
+                                start=first.bond_start(), cache_dir=tmp_path, executor="serial",
+                                runner=power_law_runner, max_runs=8)
+    seen = [C._canon(json.loads(p.read_text())["spec"]) for p in tmp_path.rglob("*.json")]
+    assert seen and all(s["preset"]["contact"]["k1"] == pytest.approx(k1, rel=1e-9) for s in seen)
+    assert len(CALLS) < runs_cold
+    assert (warm.table["z_sigma_f"].abs() < 1).all() and (warm.table["z_dLf_D"].abs() < 1).all()
+    with pytest.raises(ValueError, match="compaction=None"):
+        C.calibrate_variants(vs, "tiny", contact={"k1": 4e4}, runner=power_law_runner)
+    with pytest.raises(ValueError, match="k_1"):
+        C.calibrate_variants(vs, "tiny", compaction=None, contact={"k_1": 4e4}, runner=power_law_runner)
+    with pytest.raises(ValueError, match="k1"):
+        C.calibrate_variants(vs, "tiny", compaction=None, contact={"k1": -1.0}, runner=power_law_runner)
 
 
 def test_calibration_plots(tmp_path):

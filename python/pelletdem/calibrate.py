@@ -1747,6 +1747,11 @@ class CalibrationReport:
     n_relaxations: int
     wall_time_s: float
 
+    def bond_start(self) -> Dict[str, Dict[str, float]]:
+        """The fitted bond parameters per variant, {label: {name: value}} (SI units), to start
+        another calibration from (``calibrate_variants(start=...)``)."""
+        return {label: dict(f.params) for label, f in self.fits.items()}
+
     def __str__(self) -> str:
         import pandas as pd
 
@@ -1766,7 +1771,8 @@ def calibrate_variants(variants=None, preset="tiny", *,
                        bond_params: Optional[Mapping[str, Sequence[float]]] = None,
                        start="table5", seeds=(0,), tol: float = 0.5, max_runs: int = 8,
                        compaction_max_runs: int = 6, max_dLD: Optional[float] = None,
-                       bond: Optional[BondLaw] = None, cache_dir: Optional[Union[str, os.PathLike]] = None,
+                       bond: Optional[BondLaw] = None, contact: Optional[Mapping[str, float]] = None,
+                       cache_dir: Optional[Union[str, os.PathLike]] = None,
                        executor=None, max_workers: Optional[int] = None,
                        runner: Callable[[RunSpec], dict] = run_point,
                        relaxed_dir: Optional[Union[str, os.PathLike]] = None,
@@ -1791,6 +1797,12 @@ def calibrate_variants(variants=None, preset="tiny", *,
        The 12 fits run concurrently on one executor (default a process pool of
        ``max_workers``); each worker relaxes a pellet once per pressure and reuses it.
 
+    ``contact``: ContactLaw field overrides used as they are, in place of step 1 (only with
+    ``compaction=None``): e.g. ``report.contact`` of a calibration on a smaller preset of the
+    same radii, whose pellets' densities under a pressure should be close to the larger ones'
+    (the table's ``bd_sim`` shows how close); pass ``start=report.bond_start()`` as well to
+    begin the bond fits where the smaller preset's ended.
+
     ``seeds``: packing seeds averaged per point. ``cache_dir``, ``executor``, ``max_workers``,
     ``runner``, ``relaxed_dir``: as in :func:`scan`. ``verbose``: print every point.
 
@@ -1809,13 +1821,19 @@ def calibrate_variants(variants=None, preset="tiny", *,
     _parse_bounds(bond_params)
     if compaction is not None:
         _parse_bounds(compaction)
+    if contact is not None:
+        if compaction is not None:
+            raise ValueError("contact = {...} fixes the contact law: pass compaction=None with it")
+        if not isinstance(contact, Mapping):
+            raise ValueError(f"contact = {contact!r}: pass a mapping of ContactLaw fields, e.g. {{'k1': 4e4, 'k2': 1.6e5}}")
+        make_spec({}, preset=p, diametral=False, contact=contact)  # names and values checked
     if not isinstance(start, (str, Mapping)) or (isinstance(start, str) and start != "table5"):
         raise ValueError(f"start = {start!r}: pass 'table5' or a mapping {{label: {{name: value}}}}")
     vlog = (lambda *a: print(*a, flush=True)) if verbose else (lambda *a: None)
 
     with _open_executor(executor, max_workers) as ex:
         ev = _Evaluator(RunCache(cache_dir), ex, _with_relaxed_dir(runner, relaxed_dir))
-        contact: dict = {}
+        contact = dict(contact or {})
         comp_fit = None
         if compaction is not None:
             vlog("[calibrate] compaction fit")
