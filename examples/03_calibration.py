@@ -1,19 +1,27 @@
 """Calibration of the paper's 12 variants against Tables 2 and 3, beside the paper's Table 5.
 
     python examples/03_calibration.py OUT_DIR [--preset tiny|quick|paper] [--workers N]
-                                      [--max-runs N] [--variant oak 8 120 ...]
+                                      [--max-runs N] [--compaction-runs N] [--from DIR]
+                                      [--variant oak 8 120 ...]
 
 One shared loading stiffness k1 against Table 2's pellet densities, then E_b and sigma_c per
 variant against Table 3's sigma_f and dL_f/D (pelletdem.calibrate.calibrate_variants). Writes
 into OUT_DIR: calibration.csv (the fitted values beside Table 5 and the errors against Tables 2
-and 3), fig15_measured_vs_simulated.png and fig15_curves.png (each variant's fitted
-sigma_1(dL/D) with Table 3's point). Runs are cached in OUT_DIR/cache: run again to resume.
+and 3), calibration.json (the contact law, the bond fits, runs and wall time),
+fig15_measured_vs_simulated.png and fig15_curves.png (each variant's fitted sigma_1(dL/D) with
+Table 3's point). Runs are cached in OUT_DIR/cache: run again to resume.
+
+``--from DIR`` takes the contact law (k1) and the bond fits of an earlier calibration written
+to DIR, on a smaller preset, in place of the compaction fit and Table 5's starting values:
+the paper-size calibration then relaxes one pellet per pressure instead of one per k1 tried.
 
 Size knob: PRESET and MAX_RUNS below. "tiny" with 4 runs per variant takes a few minutes on
-two cores; the full study is --preset paper --max-runs 8 (~9 h on two cores, estimated, or give
+two cores; the full study is --preset quick --compaction-runs 6 --max-runs 8 (~20 min), then
+--preset paper --max-runs 8 --from the quick run's OUT_DIR (hours on two cores, or give
 calibrate_variants a Dask distributed.Client).
 """
 import argparse
+import json
 from pathlib import Path
 
 import numpy as np
@@ -30,9 +38,21 @@ def main(argv=None):
     ap.add_argument("--preset", default=PRESET, choices=["tiny", "quick", "paper"])
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--max-runs", type=int, default=MAX_RUNS)
+    ap.add_argument("--compaction-runs", type=int, default=COMPACTION_RUNS,
+                    help="k1 points of the shared compaction fit (0: keep Table 4's k1)")
+    ap.add_argument("--from", dest="source", type=Path, default=None,
+                    help="OUT_DIR of an earlier calibration: its k1 and bond fits are the start here")
     ap.add_argument("--variant", nargs=3, action="append", metavar=("MATERIAL", "MC", "SIGMA_Z_MPA"),
                     help="calibrate only these variants (repeatable); default all 12")
     args = ap.parse_args(argv)
+    if args.compaction_runs < 0 or args.max_runs < 1 or args.workers < 1:
+        ap.error("--compaction-runs must be >= 0, --max-runs and --workers >= 1")
+    source = None
+    if args.source is not None:
+        path = args.source / "calibration.json"
+        if not path.is_file():
+            ap.error(f"--from {args.source}: no calibration.json there (write one with this script)")
+        source = json.loads(path.read_text())
 
     import matplotlib
 
@@ -48,12 +68,22 @@ def main(argv=None):
                 else [measured.variant(m, int(mc), int(sz)) for m, mc, sz in args.variant])
     args.out.mkdir(parents=True, exist_ok=True)
     k1 = preset.contact.k1
+    if source is not None:
+        setup = dict(compaction=None, contact=source["contact"], start=source["bond_start"])
+    elif args.compaction_runs:
+        setup = dict(compaction={"k1": (k1 / 10, k1 * 10, k1)}, compaction_max_runs=args.compaction_runs)
+    else:
+        setup = dict(compaction=None)
     report = calibrate.calibrate_variants(
-        variants, preset, compaction={"k1": (k1 / 10, k1 * 10, k1)} if COMPACTION_RUNS else None,
-        compaction_max_runs=max(COMPACTION_RUNS, 1), max_runs=args.max_runs,
-        cache_dir=args.out / "cache", relaxed_dir=args.out / "relaxed", max_workers=args.workers)
+        variants, preset, max_runs=args.max_runs, cache_dir=args.out / "cache",
+        relaxed_dir=args.out / "relaxed", max_workers=args.workers, **setup)
     print(report)
     report.table.to_csv(args.out / "calibration.csv", index=False)
+    (args.out / "calibration.json").write_text(json.dumps({
+        "preset": args.preset, "contact": report.contact, "bond_start": report.bond_start(),
+        "from": str(args.source) if args.source else None, "n_simulations": report.n_simulations,
+        "n_cached": report.n_cached, "n_relaxations": report.n_relaxations,
+        "wall_time_s": report.wall_time_s}, indent=1))
 
     fig = plots.calibration_measured_vs_simulated(report)
     fig.savefig(args.out / "fig15_measured_vs_simulated.png", dpi=120)
