@@ -573,3 +573,13 @@ def test_branch_uses_its_own_diametral_settings():
     assert b["relaxed_reused"]
     assert max(a["curve"]["dL_D"]) == pytest.approx(0.03, abs=0.002)
     assert max(b["curve"]["dL_D"]) == pytest.approx(0.05, abs=0.002)
+
+
+def test_calibrate_variants_relaxes_each_pellet_once_before_the_fits(tmp_path):
+    """Two variants at the same pressure on two worker processes: the pellet is relaxed once,
+    before the fits start (they used to start together, and both workers relaxed it)."""
+    rep = C.calibrate_variants([("oak", 8, 120), ("pine", 8, 120)], "tiny", compaction=None, max_runs=1,
+                               max_workers=2, cache_dir=tmp_path / "cache", relaxed_dir=tmp_path / "relaxed")
+    assert rep.n_relaxations == 1
+    assert rep.n_simulations == 3  # the density run and one point per variant
+    assert len(list((tmp_path / "relaxed").glob("*.h5"))) == 1

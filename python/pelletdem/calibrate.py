@@ -1795,7 +1795,9 @@ def calibrate_variants(variants=None, preset="tiny", *,
        Table 3's dL_f/D, at least the preset's), so the peak is inside it; a run that ends
        before its peak gives bounds, which the fit trusts less than values.
        The 12 fits run concurrently on one executor (default a process pool of
-       ``max_workers``); each worker relaxes a pellet once per pressure and reuses it.
+       ``max_workers``). Before them, one compaction-only run per pressure (and seed) relaxes
+       each pellet once, in parallel; the fits branch off those pellets (a worker that does
+       not hold one loads it from ``relaxed_dir`` when given, else relaxes it itself).
 
     ``contact``: ContactLaw field overrides used as they are, in place of step 1 (only with
     ``compaction=None``): e.g. ``report.contact`` of a calibration on a smaller preset of the
@@ -1843,6 +1845,18 @@ def calibrate_variants(variants=None, preset="tiny", *,
             k1 = val if name == "k1" else k1_from_yield_strength(val, p.radius_mean)
             contact = {"k1": k1, "k2": k1 * p.contact.k2 / p.contact.k1}
 
+        # Densities of every variant's pressure under the shared contact law, first: these
+        # runs relax one pellet per pressure and seed, all at once on the workers, so that the
+        # twelve fits then start from them (with relaxed_dir, any worker loads them) instead of
+        # several workers relaxing the same pellet at the same time.
+        dens = {}
+        sizes = sorted({v.sigma_z for v in vs})
+        pending = {sz: [ev.submit(make_spec({}, preset=p, sigma_z=sz, seed=s, diametral=False, contact=contact))
+                        for s in _setup(p, None, None, seeds, None).seeds] for sz in sizes}
+        for sz in sizes:
+            outs, _, good, _ = _mean_outputs([f.result() for f in pending[sz]])
+            dens[sz] = outs if good else {}
+
         def one(v):
             st = {}
             if start == "table5":
@@ -1865,13 +1879,6 @@ def calibrate_variants(variants=None, preset="tiny", *,
         with cf.ThreadPoolExecutor(max_workers=len(vs), thread_name_prefix="calibrate") as drivers:
             fits = dict(zip([v.label for v in vs], drivers.map(one, vs)))
 
-        # densities of every variant's pressure under the shared contact law
-        dens = {}
-        for sz in sorted({v.sigma_z for v in vs}):
-            recs = [ev.submit(make_spec({}, preset=p, sigma_z=sz, seed=s, diametral=False, contact=contact))
-                    for s in _setup(p, None, None, seeds, None).seeds]
-            outs, _, good, _ = _mean_outputs([f.result() for f in recs])
-            dens[sz] = outs if good else {}
         stats = ev.stats()
 
     rows = []
