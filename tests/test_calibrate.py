@@ -419,7 +419,7 @@ def test_calibrate_variants_transfers_a_contact_law_and_warm_starts(tmp_path):
     k1 = first.contact["k1"]
     assert first.bond_start().keys() == first.fits.keys()
     CALLS.clear()
-    cold = C.calibrate_variants(vs, "quick", compaction=None, contact=first.contact, executor="serial",
+    cold = C.calibrate_variants(vs, "quick", contact=first.contact, executor="serial",
                                 runner=power_law_runner, max_runs=8)
     runs_cold = len(CALLS)
     assert cold.compaction is None and cold.contact == first.contact
@@ -431,8 +431,9 @@ def test_calibrate_variants_transfers_a_contact_law_and_warm_starts(tmp_path):
     assert seen and all(s["preset"]["contact"]["k1"] == pytest.approx(k1, rel=1e-9) for s in seen)
     assert len(CALLS) < runs_cold
     assert (warm.table["z_sigma_f"].abs() < 1).all() and (warm.table["z_dLf_D"].abs() < 1).all()
-    with pytest.raises(ValueError, match="compaction=None"):
-        C.calibrate_variants(vs, "tiny", contact={"k1": 4e4}, runner=power_law_runner)
+    with pytest.raises(ValueError, match="pass one"):
+        C.calibrate_variants(vs, "tiny", contact={"k1": 4e4}, compaction={"k1": (1e4, 1e5)},
+                             runner=power_law_runner)
     with pytest.raises(ValueError, match="k_1"):
         C.calibrate_variants(vs, "tiny", compaction=None, contact={"k_1": 4e4}, runner=power_law_runner)
     with pytest.raises(ValueError, match="k1"):

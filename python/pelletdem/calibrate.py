@@ -1799,8 +1799,8 @@ def calibrate_variants(variants=None, preset="tiny", *,
        each pellet once, in parallel; the fits branch off those pellets (a worker that does
        not hold one loads it from ``relaxed_dir`` when given, else relaxes it itself).
 
-    ``contact``: ContactLaw field overrides used as they are, in place of step 1 (only with
-    ``compaction=None``): e.g. ``report.contact`` of a calibration on a smaller preset of the
+    ``contact``: ContactLaw field overrides used as they are, in place of step 1 (so not with
+    a ``compaction`` mapping): e.g. ``report.contact`` of a calibration on a smaller preset of the
     same radii, whose pellets' densities under a pressure should be close to the larger ones'
     (the table's ``bd_sim`` shows how close); pass ``start=report.bond_start()`` as well to
     begin the bond fits where the smaller preset's ended.
@@ -1817,7 +1817,7 @@ def calibrate_variants(variants=None, preset="tiny", *,
     vs = _variants(variants)
     p = _as_preset(preset)
     if compaction == "default":
-        compaction = {"k1": (p.contact.k1 / 10, p.contact.k1 * 10, p.contact.k1)}
+        compaction = None if contact is not None else {"k1": (p.contact.k1 / 10, p.contact.k1 * 10, p.contact.k1)}
     if bond_params is None:
         bond_params = {"E_b": (1e5, 1e10), "sigma_c": (1e4, 1e10)}
     _parse_bounds(bond_params)
@@ -1825,7 +1825,7 @@ def calibrate_variants(variants=None, preset="tiny", *,
         _parse_bounds(compaction)
     if contact is not None:
         if compaction is not None:
-            raise ValueError("contact = {...} fixes the contact law: pass compaction=None with it")
+            raise ValueError("contact = {...} fixes the contact law; compaction = {...} fits it: pass one")
         if not isinstance(contact, Mapping):
             raise ValueError(f"contact = {contact!r}: pass a mapping of ContactLaw fields, e.g. {{'k1': 4e4, 'k2': 1.6e5}}")
         make_spec({}, preset=p, diametral=False, contact=contact)  # names and values checked
