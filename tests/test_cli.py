@@ -120,6 +120,15 @@ def test_cli_run_matches_the_pipeline(cli_run, tiny_life):
     (["run", "--out", "x", "--checkpoint-interval", "-1"], "--checkpoint-interval"),
     (["run", "--out", "x", "--checkpoint-interval", "nan"], "--checkpoint-interval"),
     (["run", "--out", "x", "--checkpoint-interval", "soon"], "--checkpoint-interval"),
+    (["run", "--out", "x", "--sigma-z", "nan"], "--sigma-z"),
+    (["run", "--out", "x", "--sigma-z", "2000", "--E-b", "30", "--sigma-c", "9"], "--sigma-z"),
+    (["run", "--out", "x", "--E-b", "30"], "--sigma-c"),
+    (["run", "--out", "x", "--tau-c", "9"], "--tau-c"),
+    (["run", "--out", "x", "--E-b", "-3", "--sigma-c", "9"], "--E-b"),
+    (["run", "--out", "x", "--E-b", "30", "--sigma-c", "inf"], "--sigma-c"),
+    (["run", "--out", "x", "--r-b", "0"], "--r-b"),
+    (["run", "--out", "x", "--max-dld", "0.7"], "--max-dld"),
+    (["run", "--out", "x", "--max-dld", "0"], "--max-dld"),
     (["run", "--out", "", "--preset", "tiny"], "--out"),
     (["run", "--preset", "tiny"], "--out"),
     (["fly"], "command"),
@@ -221,6 +230,29 @@ def test_another_run_in_the_same_directory_is_refused_and_restart_discards(cli_r
     assert proc.returncode == 0, proc.stderr[-3000:]
     s = json.loads((out / "summary.json").read_text())
     assert (s["seed"], s["n_particles"]) == (1, 60)
+
+
+def test_explicit_bonds_at_a_pressure_table_5_lacks(tmp_path):
+    """--E-b/--sigma-c (MPa) and --r-b (um) set the bonds, so any pressure runs; the summary says
+    where the bonds came from and has no measured values to compare; another bond law in the
+    same directory is refused, like any other change of the run."""
+    out = tmp_path / "p90"
+    args = ["--sigma-z", "90", "--E-b", "30", "--sigma-c", "9", "--tau-c", "12", "--r-b", "25",
+            "--max-dld", "0.04", "--particles", "150"]
+    proc = _cli(out, *args)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    s = json.loads((out / "summary.json").read_text())
+    assert s["sigma_z_mpa"] == 90.0 and s["bond"]["source"] == "command line"
+    assert s["measured_sigma_f_mpa"] is None and s["measured_dLf_D"] is None
+    res = Result.load(out / "result.h5")
+    law = res.params["bond"]
+    assert (law["youngs_modulus"], law["sigma_c"], law["tau_c"]) == (30e6, 9e6, 12e6)
+    assert law["radius"] == pytest.approx(25e-6, rel=1e-12)
+    assert res.params["sigma_z"] == 90e6 and res.params["preset"]["max_dLD"] == 0.04
+    assert res.scalar("compact", "sigma_z_reached") >= 90e6
+    assert res.series("diametral", "dL_D")[-1] == pytest.approx(0.04, abs=2e-3)
+    proc = _cli(out, *args[:-4], "--E-b", "31", *args[-4:])
+    assert proc.returncode == 2 and "E_b" in proc.stderr and "Traceback" not in proc.stderr
 
 
 def test_a_run_killed_with_sigkill_resumes_to_the_same_bits(cli_run, tmp_path):
