@@ -11,13 +11,12 @@ namespace pelletdem {
 namespace {
 
 // Rolling friction of eq. 11 on one body: -m_r f_n r w/|w|, capped so that one step's torque
-// cannot reverse the spin (otherwise a resting sphere chatters about w = 0).
-PELLETDEM_INLINE Vec3 rolling_torque(double m_r, double fn, double r, const Vec3& w, double inv_i,
-                           double dt) {
-  const double wl = w.norm();
-  if (m_r <= 0.0 || fn <= 0.0 || wl == 0.0) return Vec3::Zero();
-  const double cap = wl / (dt * inv_i);
-  return -std::min(m_r * fn * r, cap) * (w / wl);
+// cannot reverse the spin (otherwise a resting sphere chatters about w = 0). The direction
+// w/|w| and the cap |w| / (dt / I) are the body's, worked out once per step
+// (World::rolling_setup) rather than once per contact.
+PELLETDEM_INLINE Vec3 rolling_torque(double m_r, double fn, double r, const Vec3& dir, double cap) {
+  if (m_r <= 0.0 || fn <= 0.0 || cap == 0.0) return Vec3::Zero();
+  return -std::min(m_r * fn * r, cap) * dir;
 }
 
 // Sine and cosine of a step's twist angle: a short series for the tiny angles of a time step
@@ -379,6 +378,8 @@ void World::compute_forces(bool advance) {
     buf_f_[k].resize(n);
     buf_t_[k].resize(n);
   }
+  roll_dir_.resize(n);
+  roll_cap_.resize(n);
   const double dt = params_.dt;
   // Incremental springs advance by v dt only when the particles moved since the last force
   // evaluation; a recomputation in place (after set_velocities, a new wall, a restored state)
@@ -406,6 +407,9 @@ void World::compute_forces(bool advance) {
     for (long i = 0; i < n; ++i) {
       p_.f[i].setZero();
       p_.t[i].setZero();
+      const double wl = p_.w[i].norm();
+      roll_cap_[i] = wl / (dt * p_.inv_i[i]);
+      roll_dir_[i] = wl == 0.0 ? Vec3::Zero() : Vec3(p_.w[i] / wl);
     }
     long n_contacts = 0;
     double max_ov = 0.0;
@@ -437,8 +441,8 @@ void World::compute_forces(bool advance) {
         F[j] += fj;
         F[i] -= fj;
         const Vec3 nxft = nv.cross(cf.ft);
-        T[i] += -ai * nxft + rolling_torque(cp.rolling, cf.fn, ri, p_.w[i], p_.inv_i[i], dt);
-        T[j] += -aj * nxft + rolling_torque(cp.rolling, cf.fn, p_.r[j], p_.w[j], p_.inv_i[j], dt);
+        T[i] += -ai * nxft + rolling_torque(cp.rolling, cf.fn, ri, roll_dir_[i], roll_cap_[i]);
+        T[j] += -aj * nxft + rolling_torque(cp.rolling, cf.fn, p_.r[j], roll_dir_[j], roll_cap_[j]);
         ++n_contacts;
         const double ov = delta / std::min(ri, p_.r[j]);
         if (ov > max_ov) {
@@ -543,7 +547,7 @@ void World::wall_forces(bool advance) {
         const Vec3 fp = cf.fn * n_into + cf.ft;
         p_.f[i] += fp;
         p_.t[i] += -a * n_into.cross(cf.ft) +
-                   rolling_torque(cp.rolling, cf.fn, p_.r[i], p_.w[i], p_.inv_i[i], dt);
+                   rolling_torque(cp.rolling, cf.fn, p_.r[i], roll_dir_[i], roll_cap_[i]);
         const Vec3 contact_point = p_.x[i] - a * n_into;
         fsum -= fp;
         tsum += (contact_point - w.point).cross(-fp);

@@ -177,6 +177,9 @@ class World {
   std::vector<BrokenBond> broken_;
   std::vector<Vec3> x_build_;
   std::vector<std::vector<Vec3>> buf_f_, buf_t_;
+  // Per particle, this step's rolling-friction direction w/|w| and cap |w| / (dt / I) (eq. 11).
+  std::vector<Vec3> roll_dir_;
+  std::vector<double> roll_cap_;
   std::vector<int> load_walls_;
   std::vector<Sample> samples_;
   std::vector<std::vector<WallSample>> wall_samples_;
