@@ -12,8 +12,8 @@ namespace {
 
 // Rolling friction of eq. 11 on one body: -m_r f_n r w/|w|, capped so that one step's torque
 // cannot reverse the spin (otherwise a resting sphere chatters about w = 0). The direction
-// w/|w| and the cap |w| / (dt / I) are the body's, worked out once per step
-// (World::rolling_setup) rather than once per contact.
+// w/|w| and the cap |w| / (dt / I) are the body's: compute_forces works them out once per
+// particle and step rather than once per contact.
 PELLETDEM_INLINE Vec3 rolling_torque(double m_r, double fn, double r, const Vec3& dir, double cap) {
   if (m_r <= 0.0 || fn <= 0.0 || cap == 0.0) return Vec3::Zero();
   return -std::min(m_r * fn * r, cap) * dir;
@@ -378,8 +378,8 @@ void World::compute_forces(bool advance) {
     buf_f_[k].resize(n);
     buf_t_[k].resize(n);
   }
-  roll_dir_.resize(n);
-  roll_cap_.resize(n);
+  roll_dir_.resize(n, Vec3::Zero());
+  roll_cap_.resize(n, 0.0);
   const double dt = params_.dt;
   // Incremental springs advance by v dt only when the particles moved since the last force
   // evaluation; a recomputation in place (after set_velocities, a new wall, a restored state)
@@ -407,9 +407,11 @@ void World::compute_forces(bool advance) {
     for (long i = 0; i < n; ++i) {
       p_.f[i].setZero();
       p_.t[i].setZero();
-      const double wl = p_.w[i].norm();
-      roll_cap_[i] = wl / (dt * p_.inv_i[i]);
-      roll_dir_[i] = wl == 0.0 ? Vec3::Zero() : Vec3(p_.w[i] / wl);
+      if (cp.rolling > 0.0) {
+        const double wl = p_.w[i].norm();
+        roll_cap_[i] = wl / (dt * p_.inv_i[i]);
+        roll_dir_[i] = wl == 0.0 ? Vec3::Zero() : Vec3(p_.w[i] / wl);
+      }
     }
     long n_contacts = 0;
     double max_ov = 0.0;
