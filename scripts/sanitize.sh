@@ -22,9 +22,20 @@ export PYTHONPATH="$prefix"
 export LD_PRELOAD="$(g++ -print-file-name=libasan.so):$(g++ -print-file-name=libubsan.so)"
 # Leaks: CPython's own allocations at exit would be reported as leaks; the engine's are checked
 # by tests/test_memory.py in the normal build (it skips itself under ASan).
-export ASAN_OPTIONS=detect_leaks=0:abort_on_error=1
-export UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1
+# Reports also go to files: a worker process of a scan that aborts on one is retried and then
+# recorded as a failed point, so its test need not fail; the files make the run fail anyway.
+reports=$(mktemp -d)
+export ASAN_OPTIONS=detect_leaks=0:abort_on_error=1:log_path=$reports/asan
+export UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1:log_path=$reports/ubsan
 # A notebook cell may take ten times its usual time here.
 export PELLETDEM_NOTEBOOK_CELL_TIMEOUT=${PELLETDEM_NOTEBOOK_CELL_TIMEOUT:-9000}
 python3 -c "import pelletdem._core as c; assert c.__file__.startswith('$prefix'), c.__file__"
+set +e
 python3 -m pytest -q -p no:cacheprovider "$@"
+rc=$?
+if [ -n "$(ls -A "$reports")" ]; then
+  echo "sanitizer reports (in $reports):"
+  cat "$reports"/*
+  rc=1
+fi
+exit $rc
