@@ -19,12 +19,13 @@ python3 -m pip install -q --disable-pip-version-check "scikit-build-core>=0.10" 
 PELLETDEM_SANITIZE=ON python3 -m pip install -q --no-deps --no-build-isolation --upgrade \
   --target "$prefix" -Ccmake.build-type=Debug -Cbuild-dir=build/asan .
 export PYTHONPATH="$prefix"
+# (made before the preload: a plain tool run under it can exit non-zero at its leak check)
+reports=$(mktemp -d)
 export LD_PRELOAD="$(g++ -print-file-name=libasan.so):$(g++ -print-file-name=libubsan.so)"
 # Leaks: CPython's own allocations at exit would be reported as leaks; the engine's are checked
 # by tests/test_memory.py in the normal build (it skips itself under ASan).
 # Reports also go to files: a worker process of a scan that aborts on one is retried and then
 # recorded as a failed point, so its test need not fail; the files make the run fail anyway.
-reports=$(mktemp -d)
 export ASAN_OPTIONS=detect_leaks=0:abort_on_error=1:log_path=$reports/asan
 export UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1:log_path=$reports/ubsan
 # A notebook cell may take ten times its usual time here.
@@ -33,6 +34,7 @@ python3 -c "import pelletdem._core as c; assert c.__file__.startswith('$prefix')
 set +e
 python3 -m pytest -q -p no:cacheprovider "$@"
 rc=$?
+unset LD_PRELOAD ASAN_OPTIONS UBSAN_OPTIONS
 if [ -n "$(ls -A "$reports")" ]; then
   echo "sanitizer reports (in $reports):"
   cat "$reports"/*
