@@ -3,6 +3,9 @@
 #
 #     bash scripts/sanitize.sh                      # the whole suite (what .ci/run runs)
 #     bash scripts/sanitize.sh tests/test_bonds.py  # or any pytest arguments
+#     PELLETDEM_NOTEBOOK_KEEP=DIR bash scripts/sanitize.sh tests/test_notebooks.py -k "runs and 04"
+#                          # notebook 04 alone takes ~2-5 h here; with DIR kept, a rerun resumes
+#                          # from its run cache
 #
 # Builds the extension with -fsanitize=address,undefined at -O2, our asserts on and Eigen's off
 # (see CMakeLists.txt), into build/asan-prefix, so the release install is untouched, and runs pytest against
