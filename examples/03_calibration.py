@@ -9,7 +9,9 @@ variant against Table 3's sigma_f and dL_f/D (pelletdem.calibrate.calibrate_vari
 into OUT_DIR: calibration.csv (the fitted values beside Table 5 and the errors against Tables 2
 and 3), calibration.json (the contact law, the bond fits, runs and wall time),
 fig15_measured_vs_simulated.png and fig15_curves.png (each variant's fitted sigma_1(dL/D) with
-Table 3's point). Runs are cached in OUT_DIR/cache: run again to resume.
+Table 3's point). Runs are cached in OUT_DIR/cache: run again to resume; calibration.json's
+``sittings`` and ``wall_time_total_s`` then add up the wall time of every sitting, killed ones
+included (up to their last finished run, a lower bound).
 
 ``--from DIR`` takes the contact law (k1) and the bond fits of an earlier calibration written
 to DIR, on a smaller preset, in place of the compaction fit and Table 5's starting values:
@@ -74,6 +76,8 @@ def main(argv=None):
         setup = dict(compaction={"k1": (k1 / 10, k1 * 10, k1)}, compaction_max_runs=args.compaction_runs)
     else:
         setup = dict(compaction=None)
+    segments = _segments_log(args.out)
+    segments.start()
     report = calibrate.calibrate_variants(
         variants, preset, max_runs=args.max_runs, cache_dir=args.out / "cache",
         relaxed_dir=args.out / "relaxed", max_workers=args.workers, **setup)
@@ -83,7 +87,7 @@ def main(argv=None):
         "preset": args.preset, "contact": report.contact, "bond_start": report.bond_start(),
         "from": str(args.source) if args.source else None, "n_simulations": report.n_simulations,
         "n_cached": report.n_cached, "n_relaxations": report.n_relaxations,
-        "wall_time_s": report.wall_time_s}, indent=1))
+        "wall_time_s": report.wall_time_s, **segments.finish(report)}, indent=1))
 
     fig = plots.calibration_measured_vs_simulated(report)
     fig.savefig(args.out / "fig15_measured_vs_simulated.png", dpi=120)
@@ -116,6 +120,45 @@ def main(argv=None):
     plt.close(fig)
     print("wrote", ", ".join(sorted(p.name for p in args.out.iterdir() if p.is_file())))
     return 0
+
+
+class _segments_log:
+    """Wall time of a calibration that ran in several sittings: OUT_DIR/segments.jsonl holds a
+    line at each start and end. A sitting that was killed has no end line; its end is taken as
+    the last cache record written before the next start (a lower bound: the runs in flight
+    when it was killed are not counted)."""
+
+    def __init__(self, out: Path):
+        self.path, self.cache = out / "segments.jsonl", out / "cache"
+
+    def _append(self, **row):
+        import time
+        with open(self.path, "a") as fh:
+            fh.write(json.dumps({"time": time.time(), **row}) + "\n")
+
+    def start(self):
+        """Marks the start of a sitting (wall clock, s since the epoch)."""
+        self._append(event="start")
+
+    def finish(self, report) -> dict:
+        """Marks the end; returns calibration.json's fields on every sitting and their sum (s)."""
+        self._append(event="end", n_simulations=report.n_simulations, n_cached=report.n_cached)
+        rows = [json.loads(line) for line in self.path.read_text().splitlines() if line.strip()]
+        mtimes = sorted(f.stat().st_mtime for f in self.cache.rglob("*.json"))
+        sittings = []
+        for k, row in enumerate(rows):
+            if row["event"] != "start":
+                continue
+            nxt = rows[k + 1] if k + 1 < len(rows) else None
+            if nxt is not None and nxt["event"] == "end":
+                sittings.append({"start": row["time"], "wall_time_s": nxt["time"] - row["time"],
+                                 "killed": False, "n_simulations": nxt["n_simulations"]})
+            else:  # killed: it ran until its last record, at least
+                stop = nxt["time"] if nxt is not None else float("inf")
+                done = [t for t in mtimes if row["time"] <= t < stop]
+                sittings.append({"start": row["time"], "wall_time_s": (max(done) - row["time"]) if done else 0.0,
+                                 "killed": True, "n_simulations": len(done)})
+        return {"sittings": sittings, "wall_time_total_s": sum(s["wall_time_s"] for s in sittings)}
 
 
 if __name__ == "__main__":   # calibrate_variants starts its worker processes with 'spawn'

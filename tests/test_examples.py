@@ -60,3 +60,33 @@ def test_pellet_life_example_runs(tmp_path):
     summary = json.loads((out / "summary.json").read_text())
     assert summary["n_particles"] == 400
     assert summary["sigma_f_mpa"] > 0
+
+
+def test_calibration_sittings_add_up(tmp_path):
+    """03_calibration.py's wall time over sittings: a finished sitting counts start to end, a
+    killed one (no end line) start to its last cache record before the next start."""
+    import importlib.util
+    import os
+    import types
+
+    spec = importlib.util.spec_from_file_location("ex03", ROOT / "examples" / "03_calibration.py")
+    ex03 = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(ex03)
+    (tmp_path / "cache" / "ab").mkdir(parents=True)
+    rows = [{"time": 1000.0, "event": "start"},                       # killed after 2 records
+            {"time": 5000.0, "event": "start"},                       # finished
+            {"time": 5600.0, "event": "end", "n_simulations": 3, "n_cached": 2}]
+    (tmp_path / "segments.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
+    for name, t in (("a", 1500.0), ("b", 1900.0), ("c", 5300.0)):
+        f = tmp_path / "cache" / "ab" / f"{name}.json"
+        f.write_text("{}")
+        os.utime(f, (t, t))
+    log = ex03._segments_log(tmp_path)
+    log.start()  # a third sitting, which ends at once
+    out = log.finish(types.SimpleNamespace(n_simulations=0, n_cached=5))
+    s = out["sittings"]
+    assert [x["killed"] for x in s] == [True, False, False]
+    assert s[0]["wall_time_s"] == 900.0 and s[0]["n_simulations"] == 2
+    assert s[1]["wall_time_s"] == 600.0 and s[1]["n_simulations"] == 3
+    assert 0.0 <= s[2]["wall_time_s"] < 60.0
+    assert out["wall_time_total_s"] == sum(x["wall_time_s"] for x in s)
