@@ -24,6 +24,7 @@ calibrate_variants a Dask distributed.Client).
 """
 import argparse
 import json
+import time
 from pathlib import Path
 
 import numpy as np
@@ -132,7 +133,6 @@ class _segments_log:
         self.path, self.cache = out / "segments.jsonl", out / "cache"
 
     def _append(self, **row):
-        import time
         with open(self.path, "a") as fh:
             fh.write(json.dumps({"time": time.time(), **row}) + "\n")
 

@@ -13,23 +13,26 @@
 # our asserts on and Eigen's off (see CMakeLists.txt), into build/san-<sanitizers>-prefix, so the
 # release install is untouched, and runs pytest against it. Both together cost more than the two
 # runs one after the other: a tiny pellet's life took 197 s under both, 72 s under ASan alone and
-# 39 s under UBSan alone (11 s in the release build), because each instruments the other's checks. The build directory is kept: a rerun rebuilds only what changed. Any sanitizer report
-# aborts the process, so it fails the test that triggered it (subprocesses of the suite, the
+# 39 s under UBSan alone (11 s in the release build), because each instruments the other's checks.
+# The build directory is kept: a rerun rebuilds only what changed. Any sanitizer report aborts
+# the process, so it fails the test that triggered it (subprocesses of the suite, the
 # CLI runs and notebook kernels, inherit the preload and the options).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-bash scripts/setup.sh ".[test]" >/dev/null
 sanitizers=${PELLETDEM_SANITIZERS:-address,undefined}
+# Checked before any work; the runtimes are located after setup.sh, which installs g++ if missing.
+# (libstdc++ is preloaded with ASan alone, for its C++ exception interceptor to find __cxa_throw)
 case "$sanitizers" in
-  address) preload="$(g++ -print-file-name=libasan.so):$(g++ -print-file-name=libstdc++.so)" ;;
-  undefined) preload="$(g++ -print-file-name=libubsan.so)" ;;
-  address,undefined|undefined,address)
-    sanitizers=address,undefined
-    preload="$(g++ -print-file-name=libasan.so):$(g++ -print-file-name=libubsan.so)" ;;
+  address) runtimes="libasan.so libstdc++.so" ;;
+  undefined) runtimes="libubsan.so" ;;
+  address,undefined|undefined,address) sanitizers=address,undefined; runtimes="libasan.so libubsan.so" ;;
   *) echo "PELLETDEM_SANITIZERS = '$sanitizers': allowed address, undefined or address,undefined" >&2
      exit 2 ;;
 esac
-# (libstdc++ is preloaded with ASan alone, for its C++ exception interceptor to find __cxa_throw)
+bash scripts/setup.sh ".[test]" >/dev/null
+preload=""
+for lib in $runtimes; do preload="$preload:$(g++ -print-file-name=$lib)"; done
+preload=${preload#:}
 tag=${sanitizers/,/-}
 prefix="$PWD/build/san-$tag-prefix"
 # The build requirements are installed here (not in a throw-away isolated environment) so that
