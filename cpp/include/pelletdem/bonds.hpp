@@ -42,6 +42,8 @@ struct BondParams {
 
 enum class BondMode : std::uint8_t { Intact = 0, Tension = 1, Shear = 2 };
 
+// The field order matters: the bond loop loads (n_prev, fn), (ft, mn), (mt, radius) and
+// (kn, kt, sigma_c, tau_c) as runs of four doubles (forces.cpp checks it at compile time).
 struct Bond {
   Index i, j;
   Vec3 n_prev;          // normal at the last update, for turning the stored vectors
