@@ -264,15 +264,14 @@ PELLETDEM_INLINE void store_run(Bond* const* g, std::size_t offset, Lane c0, Lan
   store4(reinterpret_cast<char*>(g[2]) + offset, r.c2);
   store4(reinterpret_cast<char*>(g[3]) + offset, r.c3);
 }
+// Horizontal OR and AND of a mask (lanes all ones or all zeros), in two shuffles.
 PELLETDEM_INLINE bool lane_any(LaneMask m) {
-  long long a = 0;
-  for (int k = 0; k < kLanes; ++k) a |= m[k];
-  return a != 0;
+  const LaneMask h = m | __builtin_shufflevector(m, m, 2, 3, 0, 1);
+  return (h | __builtin_shufflevector(h, h, 1, 0, 3, 2))[0] != 0;
 }
 PELLETDEM_INLINE bool lane_all(LaneMask m) {
-  long long a = -1;
-  for (int k = 0; k < kLanes; ++k) a &= m[k];
-  return a != 0;
+  const LaneMask h = m & __builtin_shufflevector(m, m, 2, 3, 0, 1);
+  return (h & __builtin_shufflevector(h, h, 1, 0, 3, 2))[0] != 0;
 }
 
 // Updates the kLanes intact bonds g[0..] and adds their forces and torques to F and T in bond
@@ -357,13 +356,14 @@ PELLETDEM_INLINE bool update_bond_group(Bond* const* g, const Particles& p, doub
   ft = {ft.x - ftn * n.x, ft.y - ftn * n.y, ft.z - ftn * n.z};
   mt = {mt.x - mtn * n.x, mt.y - mtn * n.y, mt.z - mtn * n.z};
   // Strength bounds of update_bond; a group with a bond past them is redone bond by bond.
-  const Lane inv_r = 1.0 / rad;
   const Lane sc = run_k.c2, tc = run_k.c3;
   const Lane left = 1.0 - gather([&](int k) { return g[k]->damage; });
   const Lane fs = left * sc * area, ts = left * tc * area;
-  const Lane sig_bound = -fn + 4.0 * inv_r * ((lane_abs(mt.x) + lane_abs(mt.y)) + lane_abs(mt.z));
-  const Lane tau_bound = ((lane_abs(ft.x) + lane_abs(ft.y)) + lane_abs(ft.z)) + 2.0 * inv_r * lane_abs(mn);
-  if (lane_any((sig_bound > fs) | (tau_bound > ts))) return false;
+  // The bounds times r_b (r_b > 0), which spares a division. This only picks the path: a group
+  // within rounding of a bound is redone by update_bond, whose own test then decides.
+  const Lane sig_bound = -fn * rad + 4.0 * ((lane_abs(mt.x) + lane_abs(mt.y)) + lane_abs(mt.z));
+  const Lane tau_bound = ((lane_abs(ft.x) + lane_abs(ft.y)) + lane_abs(ft.z)) * rad + 2.0 * lane_abs(mn);
+  if (lane_any((sig_bound > fs * rad) | (tau_bound > ts * rad))) return false;
 
   const L3 f{fn * n.x + ft.x, fn * n.y + ft.y, fn * n.z + ft.z};
   const L3 mom{mn * n.x + mt.x, mn * n.y + mt.y, mn * n.z + mt.z};
