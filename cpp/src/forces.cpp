@@ -387,6 +387,68 @@ PELLETDEM_INLINE bool update_bond_group(Bond* const* g, const Particles& p, doub
 
 }  // namespace
 
+// What the pair loop reports besides the forces.
+struct PairStats {
+  long contacts = 0;
+  double max_ov = 0.0;  // largest delta / min(r_i, r_j)
+  Index max_ov_i = 0;   // the smaller particle of that pair
+};
+
+// The contiguous share of `count` items that thread `tid` of `nt` gets from `omp for
+// schedule(static)`: the first count % nt threads one more. The pair and bond loops split their
+// work this way by hand so that they can be functions of their own (below).
+static void static_share(long count, int nt, int tid, long& lo, long& hi) {
+  const long q = count / nt, extra = count % nt;
+  lo = q * tid + std::min<long>(tid, extra);
+  hi = lo + q + (tid < extra ? 1 : 0);
+}
+
+// The pair loop over particles [lo, hi): the contact force of every listed pair that touches
+// (eq. 5-11), added to F and T; the history of pairs that came apart is cleared. (AVX2 and
+// x86-64-v4 copies, as the bond loop has, were timed on 2026-12-02 and gave nothing here.)
+PairStats pair_loop(long lo, long hi, const Particles& p, NeighborList& nbr, const HystereticLaw& law,
+                    const ContactLawParams& cp, double dt_inc, double adh, const Vec3* roll_dir,
+                    const double* roll_cap, Vec3* F, Vec3* T) {
+  PairStats out;
+  for (long i = lo; i < hi; ++i) {
+    const Vec3 xi = p.x[i];
+    const double ri = p.r[i];
+    for (Index k = nbr.start[i]; k < nbr.start[i + 1]; ++k) {
+      const Index j = nbr.j[k];
+      ContactHistory& h = nbr.history[k];
+      const Vec3 d = p.x[j] - xi;
+      const double rsum = ri + p.r[j];
+      const double dist2 = d.squaredNorm();
+      if (dist2 >= rsum * rsum) {
+        if (h.delta0 != 0.0 || h.ft.squaredNorm() != 0.0) h = ContactHistory{};
+        continue;
+      }
+      const double dist = std::sqrt(dist2);
+      const double delta = rsum - dist;
+      const Vec3 nv = d / dist;
+      const double ai = ri - 0.5 * delta, aj = p.r[j] - 0.5 * delta;
+      const Vec3 v_rel = p.v[j] - p.v[i] - (ai * p.w[i] + aj * p.w[j]).cross(nv);
+      const double vn = v_rel.dot(nv);
+      ContactKinematics c{delta, vn, v_rel - vn * nv, nv, ri * p.r[j] / rsum,
+                          p.m[i] * p.m[j] / (p.m[i] + p.m[j])};
+      const ContactForce cf = law.evaluate(c, h, dt_inc, cp.mu, adh);
+      const Vec3 fj = cf.fn * nv + cf.ft;
+      F[j] += fj;
+      F[i] -= fj;
+      const Vec3 nxft = nv.cross(cf.ft);
+      T[i] += -ai * nxft + rolling_torque(cp.rolling, cf.fn, ri, roll_dir[i], roll_cap[i]);
+      T[j] += -aj * nxft + rolling_torque(cp.rolling, cf.fn, p.r[j], roll_dir[j], roll_cap[j]);
+      ++out.contacts;
+      const double ov = delta / std::min(ri, p.r[j]);
+      if (ov > out.max_ov) {
+        out.max_ov = ov;
+        out.max_ov_i = static_cast<Index>(ri <= p.r[j] ? i : j);
+      }
+    }
+  }
+  return out;
+}
+
 // The bond loop over bonds [lo, hi): intact bonds in groups of kLanes where the compiler has
 // vector extensions, the rest (and groups that need it) one by one, always in bond order so
 // the forces add up in the same order. Broken bonds' indices go to `broke`. On x86-64 Linux
@@ -473,56 +535,20 @@ void World::compute_forces(bool advance) {
         roll_dir_[i] = wl == 0.0 ? Vec3::Zero() : Vec3(p_.w[i] / wl);
       }
     }
-    long n_contacts = 0;
-    double max_ov = 0.0;
-    Index max_ov_i = 0;
-#pragma omp for schedule(static)
-    for (long i = 0; i < n; ++i) {
-      const Vec3 xi = p_.x[i];
-      const double ri = p_.r[i];
-      for (Index k = nbr_.start[i]; k < nbr_.start[i + 1]; ++k) {
-        const Index j = nbr_.j[k];
-        ContactHistory& h = nbr_.history[k];
-        const Vec3 d = p_.x[j] - xi;
-        const double rsum = ri + p_.r[j];
-        const double dist2 = d.squaredNorm();
-        if (dist2 >= rsum * rsum) {
-          if (h.delta0 != 0.0 || h.ft.squaredNorm() != 0.0) h = ContactHistory{};
-          continue;
-        }
-        const double dist = std::sqrt(dist2);
-        const double delta = rsum - dist;
-        const Vec3 nv = d / dist;
-        const double ai = ri - 0.5 * delta, aj = p_.r[j] - 0.5 * delta;
-        const Vec3 v_rel = p_.v[j] - p_.v[i] - (ai * p_.w[i] + aj * p_.w[j]).cross(nv);
-        const double vn = v_rel.dot(nv);
-        ContactKinematics c{delta, vn, v_rel - vn * nv, nv, ri * p_.r[j] / rsum,
-                            p_.m[i] * p_.m[j] / (p_.m[i] + p_.m[j])};
-        const ContactForce cf = law_.evaluate(c, h, dt_inc, cp.mu, adh);
-        const Vec3 fj = cf.fn * nv + cf.ft;
-        F[j] += fj;
-        F[i] -= fj;
-        const Vec3 nxft = nv.cross(cf.ft);
-        T[i] += -ai * nxft + rolling_torque(cp.rolling, cf.fn, ri, roll_dir_[i], roll_cap_[i]);
-        T[j] += -aj * nxft + rolling_torque(cp.rolling, cf.fn, p_.r[j], roll_dir_[j], roll_cap_[j]);
-        ++n_contacts;
-        const double ov = delta / std::min(ri, p_.r[j]);
-        if (ov > max_ov) {
-          max_ov = ov;
-          max_ov_i = static_cast<Index>(ri <= p_.r[j] ? i : j);
-        }
-      }
-    }
+    long lo, hi;
+    static_share(n, nt, tid, lo, hi);
+    const PairStats ps = pair_loop(lo, hi, p_, nbr_, law_, cp, dt_inc, adh, roll_dir_.data(),
+                                   roll_cap_.data(), F, T);
+    // A thread's bonds add to its own buffers, so it goes on to them without waiting for the
+    // others' pairs; the reduction below waits for all.
     if (nbonds > 0) {
-      // A contiguous share of the bonds per thread, the shares of `omp for schedule(static)`.
-      const long q = nbonds / nt, extra = nbonds % nt;
-      const long lo = q * tid + std::min<long>(tid, extra), hi = lo + q + (tid < extra ? 1 : 0);
+      static_share(nbonds, nt, tid, lo, hi);
       bond_loop(bonds_, lo, hi, p_, dt_inc, F, T, broke_t[tid]);
-#pragma omp barrier
     }
-    contacts_t[tid] = n_contacts;
-    maxov_t[tid] = max_ov;
-    maxov_i_t[tid] = max_ov_i;
+#pragma omp barrier
+    contacts_t[tid] = ps.contacts;
+    maxov_t[tid] = ps.max_ov;
+    maxov_i_t[tid] = ps.max_ov_i;
     // Reduce the thread buffers in a fixed order: the same thread count gives the same bits.
 #pragma omp for schedule(static)
     for (long i = 0; i < n; ++i) {
