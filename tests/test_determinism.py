@@ -86,6 +86,29 @@ def test_one_and_two_threads_agree_to_round_off():
     assert a.contact_count == b.contact_count
 
 
+@pytest.mark.parametrize("n_side, threads", [(8, 1), (13, 2)])
+def test_vector_kernels_give_the_scalar_kernels_bits(n_side, threads):
+    """The four-lane pair and bond kernels against the scalar ones, on a dense bonded lattice
+    whose bonds are weak enough that some break during the run (so groups also fall back to
+    the scalar path mid-run): every bit of the state, the forces and the breakage record agree."""
+    a = dense_lattice(n_side, threads=threads)
+    a.run(50)
+    a.create_bonds(pd.BondLaw(sigma_c=4e6, tau_c=4e6, gap_tolerance=1e-5).to_core())
+    b = a.clone()
+    b._core.vector_kernels = False
+    assert a._core.vector_kernels and not b._core.vector_kernels
+    a.run(300)
+    b.run(300)
+    assert a.coordination_number() > 4.0
+    n_broken = len(a.broken_bonds()["time"])
+    assert 0 < n_broken < a.bond_count
+    assert np.array_equal(state(a), state(b))
+    assert np.array_equal(np.array(a.f), np.array(b.f))
+    assert np.array_equal(np.array(a.t), np.array(b.t))
+    for k, v in a.broken_bonds().items():
+        assert np.array_equal(v, b.broken_bonds()[k]), k
+
+
 # --- whole pellets: sigma_f at another thread count ----------------------------------------------
 
 def test_thread_count_does_not_change_the_tiny_pellet(tiny_life):

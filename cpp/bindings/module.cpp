@@ -648,6 +648,9 @@ PYBIND11_MODULE(_core, m) {
       .def("step", [](World& w) { py::gil_scoped_release r; w.step(); })
       .def_property_readonly("time", &World::time)
       .def_property_readonly("step_count", &World::step_count)
+      .def_property("vector_kernels", &World::vector_kernels, &World::set_vector_kernels,
+                    "Four-lane pair and bond kernels (default on); off runs the scalar ones, "
+                    "which give the same bits (the tests check it).")
       .def_property_readonly("n", [](const World& w) { return w.particles().size(); })
       .def("kinetic_energy", [](const World& w) { return w.kinetic_energy(); })
       .def("potential_energy", [](const World& w) { return w.potential_energy(); })

@@ -109,6 +109,13 @@ class HystereticLaw {
   }
 
   const ContactLawParams& params() const { return p_; }
+  double damping_factor() const { return damping_factor_; }
+  // True when pairs see the paper's law alone (no size scaling, hardening, growing k2 or
+  // normal damping): the pair loop's four-lane kernel covers exactly that case.
+  bool plain_pairs() const {
+    return !p_.scale_with_radius && p_.hardening == 0.0 && p_.unloading_growth == 0.0 &&
+           p_.normal_damping_ratio == 0.0;
+  }
 
   // Factor on k1, k2, kc for one contact. Against a wall r_eff is the particle radius.
   PELLETDEM_INLINE double stiffness_scale(double r_eff, bool wall) const {

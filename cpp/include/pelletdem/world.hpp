@@ -124,6 +124,10 @@ class World {
   double adhesion_scale() const;
   const NeighborList& neighbors() const { return nbr_; }
   long rebuild_count() const { return rebuilds_; }
+  // The four-lane pair and bond kernels (on by default). They give the scalar kernels' bits;
+  // switching them off is for the test that checks exactly that.
+  void set_vector_kernels(bool on) { vector_kernels_ = on; }
+  bool vector_kernels() const { return vector_kernels_; }
   // Pairs currently overlapping: (i, j, overlap m, normal force N).
   void contacts(std::vector<Index>& i, std::vector<Index>& j, std::vector<double>& overlap,
                 std::vector<double>& fn) const;
@@ -192,6 +196,7 @@ class World {
   Index max_overlap_i_ = 0;
   bool forces_valid_ = false;
   bool list_valid_ = false;
+  bool vector_kernels_ = true;
   double ramp_start_ = 0.0, ramp_duration_ = -1.0;
   HystereticLaw law_;
 };
