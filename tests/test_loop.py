@@ -123,6 +123,23 @@ def test_loop_refuses_a_split_without_held_out_data():
         loop.close_loop(sim, data, BOUNDS, START, held_out=lambda c: c == FIT[0], min_heldout_gain=2.0)
 
 
+def test_fit_model_damps_its_step_until_chi2_falls():
+    # sigma_f = 1 + 0.5 sin(3 ln(E_b / E_true)) MPa, from ln(E_b / E_true) = 0.45: the
+    # Gauss-Newton step is -1.49 (clipped to -1), and the steps damped by up to 1.25 all land past
+    # the dip, worse than the start; the fourth (1 / 2.25) is the first to improve. A fit that
+    # gives up after three tries stays at the start (as it did on the paper's data).
+    e_true = 50e6
+
+    def model(params, c):
+        u = math.log(params["E_b"] / e_true)
+        return Prediction(scalars={"sigma_f": 1e6 * (1 + 0.5 * math.sin(3 * u))})
+
+    data = Dataset([Observation(Condition(120e6), "sigma_f", math.nan, 1e6, 1e4, n=5)])
+    fs = loop.fit_model(FunctionSimulator(model), data, {"E_b": (1e6, 1e10)},
+                        {"E_b": e_true * math.exp(0.45)}, max_iter=20, fd_step=1e-4)
+    assert fs.params["E_b"] == pytest.approx(e_true, rel=1e-3)
+
+
 def test_fit_model_recovers_known_parameters():
     sim = FunctionSimulator(toy)
     data = loop.synthetic_dataset(sim, TRUTH, FIT, noise=0.01, points=14, quantities=("sigma_1", "sigma_f"))

@@ -541,7 +541,8 @@ def fit_model(sim: Simulator, data: Dataset, bounds: Mapping[str, Sequence[float
     bounds are fitted in log space) to ``data``, from ``start``, with ``fixed`` parameters
     held. Forward-difference Jacobians (step ``fd_step`` in ln p for positive parameters:
     10% by default, wide enough to see through a DEM pellet's run-to-run jitter). Stops after
-    ``max_iter`` iterations or when chi-square improves by less than ``tol`` (relative).
+    ``max_iter`` iterations or when chi-square improves by less than ``tol`` (relative), or
+    when 8 ever more damped steps (damping x5 each) all fail to lower it.
     """
     pars = _pars(bounds)
     fixed = dict(fixed or {})
@@ -597,7 +598,11 @@ def fit_model(sim: Simulator, data: Dataset, bounds: Mapping[str, Sequence[float
         g = J.T @ z
         A = J.T @ J
         improved = False
-        for _ in range(3):
+        # Up to 8 tries, the damping x5 each (to ~4e3 x its value): a pellet's response is far
+        # from linear, and the first Gauss-Newton steps from a poor start can overshoot by a
+        # factor of several (seen on the paper's data: three tries, all worse, stopped the fit
+        # where it started).
+        for _ in range(8):
             step = np.linalg.solve(A + lam * np.diag(np.diag(A) + 1e-12), -g)
             step = np.clip(step, -1.0, 1.0) if all(p.log for p in pars) else step
             un = np.array([p.clip_u(x) for p, x in zip(pars, u + step)])
@@ -605,6 +610,7 @@ def fit_model(sim: Simulator, data: Dataset, bounds: Mapping[str, Sequence[float
                 break
             zn = evaluate(un)
             cn = _chi2(zn)
+            say(f"    try (damping {lam:.3g}): chi2 = {cn:.2f}")
             if cn < chi:
                 improved = True
                 rel = (chi - cn) / max(chi, 1e-300)
