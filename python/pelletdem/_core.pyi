@@ -264,6 +264,12 @@ class World:
     @property
     def step_count(self) -> int: ...
     @property
+    def vector_kernels(self) -> bool:
+        """Four-lane pair and bond kernels (default on); off runs the scalar ones, which give
+        the same bits (the tests check it)."""
+    @vector_kernels.setter
+    def vector_kernels(self, value: bool) -> None: ...
+    @property
     def dt(self) -> float:
         """Time step, s."""
     @dt.setter
