@@ -257,11 +257,14 @@ static_assert(offsetof(Bond, fn) == kRunNormal + 24 && offsetof(Bond, mn) == kRu
 static_assert(offsetof(Bond, kt) == kRunStiff + 8 && offsetof(Bond, sigma_c) == kRunStiff + 16 &&
                   offsetof(Bond, tau_c) == kRunStiff + 24,
               "Bond keeps kn, kt, sigma_c, tau_c adjacent");
-PELLETDEM_INLINE L4 load_run(Bond* const* g, std::size_t offset) {
+// The four doubles at `offset` in each of g[0..3] (bonds, contact histories) as columns, and back.
+template <class Obj>
+PELLETDEM_INLINE L4 load_run(Obj* const* g, std::size_t offset) {
   auto row = [&](int k) { return load4(reinterpret_cast<const char*>(g[k]) + offset); };
   return transpose(row(0), row(1), row(2), row(3));
 }
-PELLETDEM_INLINE void store_run(Bond* const* g, std::size_t offset, Lane c0, Lane c1, Lane c2, Lane c3) {
+template <class Obj>
+PELLETDEM_INLINE void store_run(Obj* const* g, std::size_t offset, Lane c0, Lane c1, Lane c2, Lane c3) {
   const L4 r = transpose(c0, c1, c2, c3);
   store4(reinterpret_cast<char*>(g[0]) + offset, r.c0);
   store4(reinterpret_cast<char*>(g[1]) + offset, r.c1);
@@ -269,15 +272,6 @@ PELLETDEM_INLINE void store_run(Bond* const* g, std::size_t offset, Lane c0, Lan
   store4(reinterpret_cast<char*>(g[3]) + offset, r.c3);
 }
 // Horizontal OR and AND of a mask (lanes all ones or all zeros), in two shuffles.
-// Columns c0..c3 written back as one row of four doubles per object.
-template <class Obj>
-PELLETDEM_INLINE void store_rows(Obj* const* g, Lane c0, Lane c1, Lane c2, Lane c3) {
-  const L4 r = transpose(c0, c1, c2, c3);
-  store4(g[0], r.c0);
-  store4(g[1], r.c1);
-  store4(g[2], r.c2);
-  store4(g[3], r.c3);
-}
 PELLETDEM_INLINE bool lane_any(LaneMask m) {
   const LaneMask h = m | __builtin_shufflevector(m, m, 2, 3, 0, 1);
   return (h | __builtin_shufflevector(h, h, 1, 0, 3, 2))[0] != 0;
@@ -484,7 +478,7 @@ PELLETDEM_INLINE void contact_group(const Index* gi, const Index* gj, ContactHis
   const Lane m_eff = mi * mj / (mi + mj);
 
   // Eq. 5 (HystereticLaw::normal_force with scale 1 and constant k2).
-  const L4 hist = transpose(load4(gh[0]), load4(gh[1]), load4(gh[2]), load4(gh[3]));
+  const L4 hist = load_run(gh, 0);
   Lane delta0 = hist.c0;
   L3 hft{hist.c1, hist.c2, hist.c3};
   const ContactLawParams& lp = law.params();
@@ -530,7 +524,7 @@ PELLETDEM_INLINE void contact_group(const Index* gi, const Index* gj, ContactHis
     ft = lane_select(slide, capped, ft);
     hft = lane_select(slide, capped, hft);
   }
-  store_rows(gh, delta0, hft.x, hft.y, hft.z);
+  store_run(gh, 0, delta0, hft.x, hft.y, hft.z);
 
   const L3 fj{fn * nv.x + ft.x, fn * nv.y + ft.y, fn * nv.z + ft.z};
   const L3 nxft = lane_cross(nv, ft);
