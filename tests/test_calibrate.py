@@ -584,3 +584,18 @@ def test_calibrate_variants_relaxes_each_pellet_once_before_the_fits(tmp_path):
     assert rep.n_relaxations == 1
     assert rep.n_simulations == 3  # the density run and one point per variant
     assert len(list((tmp_path / "relaxed").glob("*.h5"))) == 1
+
+
+def test_calibrate_variants_puts_back_a_missing_relaxed_pellet_once(tmp_path):
+    """A resumed calibration whose density runs are cached but whose relaxed pellet is gone
+    (deleted, or written by a sitting that was killed) relaxes it again once, in the first pass,
+    and not once per worker that gets a run at that pressure."""
+    kw = dict(compaction=None, max_runs=1, max_workers=2, cache_dir=tmp_path / "cache",
+              relaxed_dir=tmp_path / "relaxed")
+    C.calibrate_variants([("oak", 8, 120)], "tiny", **kw)
+    (pellet,) = (tmp_path / "relaxed").glob("*.h5")
+    pellet.unlink()
+    rep = C.calibrate_variants([("oak", 8, 120), ("pine", 8, 120), ("birch", 8, 120)], "tiny", **kw)
+    assert rep.n_relaxations == 1
+    assert rep.n_simulations == 3  # the density run again and one new point per new variant
+    assert [p.name for p in (tmp_path / "relaxed").glob("*.h5")] == [pellet.name]

@@ -810,12 +810,15 @@ class _Evaluator:
         self.n_retried = 0      # runs submitted again after their first attempt failed
         self.failures: List[dict] = []  # points that failed every attempt: key, error, attempts
 
-    def submit(self, spec: RunSpec) -> cf.Future:
+    def submit(self, spec: RunSpec, rerun: bool = False) -> cf.Future:
+        """The run's record as a future: from the cache, or run now (``rerun``: run even when
+        cached, e.g. to recreate a relaxed pellet whose checkpoint is gone; deterministic, so
+        the record comes out the same)."""
         key = spec.key
         with self._lock:
             if key in self._inflight:
                 return self._inflight[key]
-            rec = self.cache.get(key)
+            rec = None if rerun else self.cache.get(key)
             out = cf.Future()
             if rec is not None:
                 self.n_cached += 1
@@ -1846,18 +1849,24 @@ def calibrate_variants(variants=None, preset="tiny", *,
             contact = {"k1": k1, "k2": k1 * p.contact.k2 / p.contact.k1}
 
         # Densities of every variant's pressure under the shared contact law, first: these
-        # runs relax one pellet per pressure and seed, all at once on the workers, so that the
-        # twelve fits then start from them (with relaxed_dir, any worker loads them) instead of
-        # several workers relaxing the same pellet at the same time.
-        dens = {}
+        # runs relax one pellet per pressure and seed, all at once on the workers, and each
+        # variant's fit waits for its own pressure's, so that it starts from them (with
+        # relaxed_dir, any worker loads them) instead of several workers relaxing the same
+        # pellet at the same time. A cached run whose relaxed pellet is missing from
+        # relaxed_dir (deleted, or a killed sitting) is run again to put it back.
         sizes = sorted({v.sigma_z for v in vs})
-        pending = {sz: [ev.submit(make_spec({}, preset=p, sigma_z=sz, seed=s, diametral=False, contact=contact))
-                        for s in _setup(p, None, None, seeds, None).seeds] for sz in sizes}
-        for sz in sizes:
-            outs, _, good, _ = _mean_outputs([f.result() for f in pending[sz]])
-            dens[sz] = outs if good else {}
+        keep = relaxed_dir is not None and runner is run_point
+
+        def missing(spec):
+            return keep and not os.path.exists(_relaxed_path(relaxed_dir, spec.relax_key))
+
+        pre = {sz: [make_spec({}, preset=p, sigma_z=sz, seed=s, diametral=False, contact=contact)
+                    for s in _setup(p, None, None, seeds, None).seeds] for sz in sizes}
+        pending = {sz: [ev.submit(sp, rerun=missing(sp)) for sp in specs] for sz, specs in pre.items()}
 
         def one(v):
+            for f in pending[v.sigma_z]:
+                f.result()
             st = {}
             if start == "table5":
                 st = {"E_b": v.e_b, "sigma_c": v.sigma_c}
@@ -1878,6 +1887,10 @@ def calibrate_variants(variants=None, preset="tiny", *,
 
         with cf.ThreadPoolExecutor(max_workers=len(vs), thread_name_prefix="calibrate") as drivers:
             fits = dict(zip([v.label for v in vs], drivers.map(one, vs)))
+        dens = {}
+        for sz in sizes:
+            outs, _, good, _ = _mean_outputs([f.result() for f in pending[sz]])
+            dens[sz] = outs if good else {}
 
         stats = ev.stats()
 
