@@ -820,6 +820,11 @@ def close_loop(sim: Simulator, data: Dataset, base_bounds: Mapping[str, Sequence
                                        chi2=float(np.sum((base.z * scale) ** 2)))
             say(f"model jitter (base parameters +-0.1%): rms {np.sqrt(np.mean((jit / np.maximum(np.abs(both.values), 1e-300)) ** 2)):.3f} "
                 "of the measured values, added to the SDs in quadrature")
+            # The SDs changed, so the chi-square did: the baseline is refitted with them, as
+            # every candidate will be, or a candidate would win by the refit alone.
+            say("baseline refitted with those SDs")
+            base = fit_model(sim, fit_data, base_bounds, base.params, fixed, max_iter=max_iter, fd_step=fd_step,
+                             log=say)
     res0 = _residual(fit_data, base.z, k0, alpha)
     for s in res0.lines():
         say("  " + s)
