@@ -140,6 +140,32 @@ def test_fit_model_damps_its_step_until_chi2_falls():
     assert fs.params["E_b"] == pytest.approx(e_true, rel=1e-3)
 
 
+def test_profile_leaves_out_strengths_where_the_effect_never_acts():
+    """A cap (like a plate yield stress) that no load reaches above p = 1: there every
+    prediction is the baseline's. The data have no effect and the baseline is 20 % off its
+    minimum, so an inactive strength plus the baseline's own Gauss-Newton step would score best;
+    the profile must start the refit where the effect acts (p < 1), or the refit has no
+    gradient in p. Fails when the inactive points are kept."""
+
+    def model(params, c):
+        a = max(0.0, 1.0 - params.get("contact.plate_yield_stress", 10.0)) * c.sigma_z / 120e6
+        sc, e = params["sigma_c"], params["E_b"]
+        return Prediction(scalars={"sigma_f": 1e3 * sc * (1 - 0.5 * a), "dLf_D": sc / e * (1 + 0.5 * a)})
+
+    sim = FunctionSimulator(model)
+    obs = []
+    for c in FIT:
+        pred = model(TRUTH, c)
+        obs += [Observation(c, q, math.nan, v, 0.01 * v, n=5) for q, v in pred.scalars.items()]
+    data = Dataset(obs)
+    base = loop.fit_model(sim, data, BOUNDS, {"E_b": 1.2 * TRUTH["E_b"], "sigma_c": 0.8 * TRUTH["sigma_c"]},
+                          max_iter=0)
+    cap = Effect("cap", "contact.plate_yield_stress", "Pa", 0.01, 10.0, 0.2, True, 0.0, "diametral",
+                 "a cap no load reaches above 1", "")
+    st = loop._profile_start(sim, data, base, cap, BOUNDS, 5.0, 5)
+    assert st["contact.plate_yield_stress"] < 1.0
+
+
 def test_fit_model_recovers_known_parameters():
     sim = FunctionSimulator(toy)
     data = loop.synthetic_dataset(sim, TRUTH, FIT, noise=0.01, points=14, quantities=("sigma_1", "sigma_f"))
@@ -222,15 +248,13 @@ def engine_loop(extra, tmp_path, held=(90e6,), fit=(60e6, 120e6)):
         truth = {"E_b": ENGINE_BOND["youngs_modulus"], "sigma_c": ENGINE_BOND["sigma_c"], **extra}
         data = loop.synthetic_dataset(sim, truth, conds, noise=0.03, points=14, quantities=("sigma_1",), seed=5)
         return loop.close_loop(sim, data, ENGINE_BOUNDS, ENGINE_START, held_out=lambda c: c.sigma_z in held,
-                               max_iter=4, refit_iter=5, refit_top=2)
+                               max_iter=4, refit_iter=5, refit_top=3)
 
 
 # Measured 2026-12-02 (README, "Closing the loop"): at the 'tiny' size the current build names
-# none of the three. The pellet's own jitter (6-7 % of sigma_1) exceeds the data's 3 % noise,
-# the baseline absorbs much of the effect into E_b and sigma_c, and the first-order ranking and
-# the profile then start the refit from the wrong place. These passed on the 2026-11-22 build,
-# whose chaotic realisation differed. Kept as expected failures, not deleted, so that a fix shows
-# up as XPASS.
+# plate_crushing (XPASS) but not the other two: the pellet's own jitter (6-7 % of sigma_1)
+# exceeds the data's 3 % noise and the baseline absorbs much of an effect into E_b and sigma_c.
+# Kept as expected failures (not strict), so that progress shows up as XPASS.
 @pytest.mark.slow
 @pytest.mark.xfail(reason="known: the tiny-size engine loop misses these hidden effects (README)", strict=False)
 @pytest.mark.parametrize("name,extra", [("plate_crushing", {"contact.plate_yield_stress": 1.5e5}),

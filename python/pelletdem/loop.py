@@ -739,14 +739,21 @@ def _profile_start(sim: Simulator, data: Dataset, base: FitState, eff: Effect,
     """Start of a refit: the effect's strength on a grid over its bounds (plus the first-order
     estimate), each with the base parameters moved by one Gauss-Newton step on the baseline's
     Jacobian; the best of all these points. A DEM objective is too rough for a local fit to
-    find a strength from far away."""
+    find a strength from far away.
+
+    A strength at which every prediction equals the baseline's (the effect never acts: a
+    plate yield stress no contact reaches) is left out, with its step, while another strength
+    is usable: a refit started there has no gradient in the effect's parameter, and the
+    baseline's own step, which any such point gets, would win whenever the baseline is not
+    quite at its minimum."""
     pars = _pars(base_bounds)
     grid = list(np.geomspace(eff.lo, eff.hi, points) if eff.log else np.linspace(eff.lo, eff.hi, points))
     grid.append(min(max(linear, eff.lo * (1.01 if eff.log else 1.0)), eff.hi))
     first = [{**base.params, **eff.settings(v)} for v in grid]
     zs = _zscores_many(sim, first, data)
-    second = []
-    for pset, z in zip(first, zs):
+    inactive = [bool(np.all(np.isfinite(z))) and np.allclose(z, base.z, rtol=1e-12, atol=1e-12) for z in zs]
+    second, second_inactive = [], []
+    for pset, z, off in zip(first, zs, inactive):
         if not np.all(np.isfinite(z)) or base.jacobian.size == 0:
             continue
         du, *_ = np.linalg.lstsq(base.jacobian, -z, rcond=None)
@@ -754,8 +761,12 @@ def _profile_start(sim: Simulator, data: Dataset, base: FitState, eff: Effect,
         for p, d in zip(pars, np.clip(du, -0.7, 0.7)):
             q[p.name] = p.to_v(p.clip_u(p.to_u(pset[p.name]) + d))
         second.append(q)
+        second_inactive.append(off)
     tried = first + second
-    chis = [_chi2(z) for z in zs + _zscores_many(sim, second, data)]
+    chis = np.array([_chi2(z) for z in zs + _zscores_many(sim, second, data)])
+    off = np.array(inactive + second_inactive)
+    if np.any(~off & np.isfinite(chis)):
+        chis = np.where(off, np.inf, chis)
     best = tried[int(np.argmin(chis))]
     return {k: best[k] for k in list(base_bounds) + [eff.param]}
 

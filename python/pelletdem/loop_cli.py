@@ -103,7 +103,7 @@ def run(args) -> int:
             data = loop.synthetic_dataset(sim, {"E_b": 30e6, "sigma_c": 9e6, **truth}, conds, noise=0.03,
                                           points=14, quantities=("sigma_1",), seed=5)
         res = loop.close_loop(sim, data, bounds, start, held_out=held, max_iter=args.max_iter,
-                              refit_iter=args.max_iter + 1, refit_top=2, log=say)
+                              refit_iter=args.max_iter + 1, refit_top=3, log=say)
     report = write_report(res, args.out, title)
     summary = {"verdict": res.verdict, "chosen": res.chosen, "errors": res.errors,
                "ranking": [{"effect": c.effect.name, "explained": c.explained, "accepted": c.accepted,
