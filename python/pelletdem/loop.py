@@ -823,12 +823,8 @@ def close_loop(sim: Simulator, data: Dataset, base_bounds: Mapping[str, Sequence
         jit = _model_jitter(sim, both, base.params, list(base_bounds))
         if np.any(jit > 0):
             both = both.with_model_sd(jit)
-            old_sd = fit_data.sds
             fit_data = Dataset(both.observations[:n_fit], fit_data.name)
             heldout_data = Dataset(both.observations[n_fit:], heldout_data.name)
-            scale = old_sd / fit_data.sds
-            base = dataclasses.replace(base, z=base.z * scale, jacobian=base.jacobian * scale[:, None],
-                                       chi2=float(np.sum((base.z * scale) ** 2)))
             say(f"model jitter (base parameters +-0.1%): rms {np.sqrt(np.mean((jit / np.maximum(np.abs(both.values), 1e-300)) ** 2)):.3f} "
                 "of the measured values, added to the SDs in quadrature")
             # The SDs changed, so the chi-square did: the baseline is refitted with them, as
