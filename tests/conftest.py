@@ -29,16 +29,20 @@ def tiny_life():
     """One whole pellet life on the 'tiny' preset (seed 0, one thread), run once per test
     session and shared read-only: fill -> compact (120 MPa) -> unload -> demould -> relax ->
     bond (TINY_BOND) -> diametral (to dL/D = TINY_MAX_DLD). Returns a namespace with the
-    Pellet (`pellet`, its world after the test), the Result (`result`) and the inputs."""
+    Pellet (`pellet`, its world after the test), the Result (`result`), a copy of the
+    relaxed pellet (`relaxed`: clone its world again before using it) and the inputs."""
     import time
     from types import SimpleNamespace
 
     from pelletdem import pipeline
+    from pelletdem.calibrate import clone_pellet
     from pelletdem.engine import BondLaw
 
     law = BondLaw(**TINY_BOND)
     t0 = time.perf_counter()
     pellet, res = pipeline.relaxed_pellet("tiny", sigma_z=TINY_SIGMA_Z, seed=0, threads=1, progress=False)
+    relaxed = clone_pellet(pellet)
     pipeline.break_pellet(pellet, law, res, max_dLD=TINY_MAX_DLD, progress=False)
     return SimpleNamespace(pellet=pellet, result=res, bond_law=law, max_dLD=TINY_MAX_DLD,
-                           sigma_z=TINY_SIGMA_Z, wall_time_s=time.perf_counter() - t0)
+                           sigma_z=TINY_SIGMA_Z, wall_time_s=time.perf_counter() - t0,
+                           relaxed=relaxed)

@@ -19,7 +19,9 @@ import numpy as np
 import pytest
 
 from pelletdem import calibrate as C
+from pelletdem import measured
 from pelletdem.engine import BondLaw
+from pelletdem.presets import get_preset
 
 # --- a fast stand-in for the engine ---------------------------------------------------------
 
@@ -110,6 +112,8 @@ def test_cache_key_is_sensitive_to_every_input(monkeypatch):
         "sigma_z": C.make_spec({"E_b": 30e6, "sigma_c": 9e6}, sigma_z=60e6),
         "seed": C.make_spec({"E_b": 30e6, "sigma_c": 9e6}, sigma_z=120e6, seed=1),
         "max_dLD": C.make_spec({"E_b": 30e6, "sigma_c": 9e6}, max_dLD=0.15, **base),
+        "break_drop": C.make_spec({"E_b": 30e6, "sigma_c": 9e6}, preset=get_preset("tiny").with_(
+            break_drop=0.7, break_from_dLD=0.02), **base),
         "preset": C.make_spec({"E_b": 30e6, "sigma_c": 9e6}, preset="quick", **base),
         "kind": C.make_spec({}, diametral=False, **base),
         "gap": C.make_spec({"E_b": 30e6, "sigma_c": 9e6}, bond=BondLaw(gap_tolerance=1e-6), **base),
@@ -118,7 +122,7 @@ def test_cache_key_is_sensitive_to_every_input(monkeypatch):
     assert ref.key not in keys.values()
     assert len(set(keys.values())) == len(keys)
     # the relaxed pellet does not depend on the bond law or the diametral test's settings ...
-    for name in ("E_b", "sigma_c", "tau_c", "r_b", "max_dLD", "kind", "gap"):
+    for name in ("E_b", "sigma_c", "tau_c", "r_b", "max_dLD", "break_drop", "kind", "gap"):
         assert variants[name].relax_key == ref.relax_key, name
     # ... but does on the contact law, the pressure, the seed and the preset
     for name in ("k1", "contact.mu", "sigma_z", "seed", "preset"):
@@ -403,6 +407,15 @@ def test_calibrate_variants_machinery(tmp_path):
     assert rep.compaction is not None and "k1" in rep.contact
     assert rep.n_simulations == len(set(CALLS)) == len(CALLS)
     assert "simulations run" in str(rep)
+    # every diametral test stops at its break (30 % fall), the peak kept from half the lowest
+    # measured dL_f/D of its variant on (Table 3: oak 8 % 120 MPa 0.061 +- 0.006)
+    recs = [json.loads(f.read_text()) for f in tmp_path.rglob("*.json")]
+    bond_presets = [r["spec"]["after_relax"] for r in recs if r["spec"].get("bond")]
+    assert bond_presets and all(pr["break_drop"] == pytest.approx(0.7) for pr in bond_presets)
+    assert {round(pr["break_from_dLD"], 4) for pr in bond_presets} <= {
+        round(0.5 * (v.dLf_D - 2 * v.dLf_D_sd), 4) for v in (measured.variant("oak", 8, 120), measured.variant("pine", 20, 60))}
+    with pytest.raises(ValueError, match="break_drop"):
+        C.calibrate_variants([("oak", 8, 120)], "tiny", break_drop=1.5, executor="serial", runner=power_law_runner)
     # everything is cached: a second call runs nothing
     rep2 = C.calibrate_variants([("oak", 8, 120), ("pine", 20, 60)], "tiny", cache_dir=tmp_path,
                                 executor="serial", runner=power_law_runner, max_runs=6)

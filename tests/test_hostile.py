@@ -220,7 +220,7 @@ def test_wall_and_world_setters(method, args):
 
 
 CONDITIONS = ["time", "steps", "kinetic_energy_below", "internal_kinetic_energy_below", "wall_force_above",
-              "wall_force_below", "wall_travel_above", "load_marker_above", "bogus"]
+              "wall_force_below", "wall_travel_above", "load_marker_above", "load_drop_below", "bogus"]
 
 
 @child_only

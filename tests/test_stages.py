@@ -355,6 +355,31 @@ def test_diametral_stress_rises_to_a_peak_and_falls(life):
     assert sc["sigma_f"] > 0.0
 
 
+def test_diametral_test_stops_at_the_break_with_the_same_failure_point(life):
+    # The same pellet and bonds with the preset's break detection on: the run is the same
+    # step for step until the plate force has fallen to break_drop of its peak, then stops.
+    from pelletdem.calibrate import clone_pellet
+
+    full = _stage(life, "diametral")
+    y = full.series["sigma_1"]
+    k = int(np.argmax(y))
+    drop = 0.75  # the tiny pellet falls by about a third after its peak (conftest.TINY_BOND)
+    assert y[k:].min() < 0.7 * y[k]
+    pellet = clone_pellet(life.relaxed)
+    pellet.preset = pellet.preset.with_(break_drop=drop, break_from_dLD=0.02)
+    res = pipeline.break_pellet(pellet, life.bond_law, max_dLD=life.max_dLD, progress=False)
+    st = res.stages["diametral"]
+    assert st.scalars["stopped_on_break"] == 1.0 and full.scalars["stopped_on_break"] == 0.0
+    n = len(st.series["sigma_1"]) - 1  # the last sample is the stop's own
+    assert st.series["dL_D"][-1] < full.series["dL_D"][-1] - 0.005
+    assert st.steps < full.steps
+    np.testing.assert_array_equal(st.series["sigma_1"][:n], y[:n])
+    assert (st.scalars["sigma_f"], st.scalars["dLf_D"]) == (full.scalars["sigma_f"], full.scalars["dLf_D"])
+    # It stopped past the peak, with the force below break_drop of the sampled peak's level.
+    assert st.series["dL_D"][-1] > full.scalars["dLf_D"]
+    assert st.series["sigma_1"][-1] <= drop * full.scalars["sigma_f"] * 1.05
+
+
 def test_bonds_break_during_the_diametral_test(life):
     st, bond = _stage(life, "diametral"), _stage(life, "bond")
     s, sc = st.series, st.scalars

@@ -154,6 +154,81 @@ def test_sphere_squeezed_between_two_planes_stays_between_them():
     assert w.wall_state(hi)["max_overlap_ratio"] > 0.7
 
 
+def _squeezed_sphere():
+    """One sphere between two load-wall planes closing in at 0.2 m/s each."""
+    law = pd.ContactLaw(wall_stiffness_factor=SW, kc=0.0)
+    w = pd.World(dt=2e-7, contact=law, gravity=(0, 0, 0), skin=2e-5, max_overlap_ratio=5.0)
+    w.add_particles(np.array([[0, 0, 1e-3]]), np.array([R]))
+    lo = w.add_plane("lo", [0, 0, 1e-3 - R], [0, 0, 1])
+    hi = w.add_plane("hi", [0, 0, 1e-3 + R], [0, 0, -1])
+    w.set_load_walls([lo, hi])
+    for k, vz in ((lo, 0.2), (hi, -0.2)):
+        w.set_wall_velocity(k, [0, 0, vz])
+    return w, lo, hi
+
+
+def test_load_drop_stop_fires_at_the_fraction_of_the_kept_peak():
+    # Load, then open the plates again: the force falls along the unloading line, and the
+    # break detection (load_drop_below) stops the run where it reaches half the peak.
+    w, lo, hi = _squeezed_sphere()
+    w.track_load_peak(0.0)
+    out = w.run_until(max_steps=10_000, wall_travel_above=(lo, 0.3 * R))
+    assert out.reason == "wall_travel_above"
+    peak = w.load_force
+    assert peak > 0 and w.load_peak == pytest.approx(peak, rel=1e-12)
+    assert w.load_force == pytest.approx(0.5 * (w.wall_state(lo)["normal_force"] + w.wall_state(hi)["normal_force"]))
+    for k, vz in ((lo, -0.2), (hi, 0.2)):
+        w.set_wall_velocity(k, [0, 0, vz])
+    saved = w.get_state()
+    out = w.run_until(max_steps=10_000, load_drop_below=0.5)
+    assert out.reason == "load_drop_below"
+    f_end = w.load_force
+    # One step before it the force was above half the peak: the steps' decrement bounds it.
+    per_step = peak / (0.3 * R / (0.2 * 2e-7))
+    assert 0.5 * peak - 4 * per_step < f_end <= 0.5 * peak
+    assert w.load_peak == pytest.approx(peak, rel=1e-12)  # unloading adds nothing to the peak
+    # The peak is state: a world restored to the saved state stops at the same step.
+    w2, _, _ = _squeezed_sphere()
+    w2.restore_state(saved)
+    assert w2.load_peak == pytest.approx(peak, rel=1e-12)
+    out2 = w2.run_until(max_steps=10_000, load_drop_below=0.5)
+    assert (out2.reason, out2.steps, w2.load_force) == (out.reason, out.steps, f_end)
+
+
+def test_load_smoothing_is_an_exponential_mean_that_lags_a_ramp_by_n_minus_one_steps():
+    # Under a force growing by df per step, s += (f - s) / n settles at f - (n - 1) df.
+    w, lo, hi = _squeezed_sphere()
+    w.run_until(max_steps=10_000, wall_travel_above=(lo, 0.05 * R))  # in contact, loading
+    n = 20.0
+    w.track_load_peak(0.0, n)
+    f0 = w.load_force
+    w.run(400)
+    f1 = w.load_force
+    w.run(1)
+    df = w.load_force - f1
+    assert df > 0 and f1 > f0
+    assert w.load_smoothed == pytest.approx(w.load_force - (n - 1) * df, rel=2e-3)
+    assert w.load_peak == pytest.approx(w.load_smoothed, rel=1e-12)
+    with pytest.raises(pd.ParameterError, match="smoothing_steps"):
+        w.track_load_peak(0.0, 0.5)
+
+
+def test_load_peak_is_kept_only_from_its_marker_on():
+    w, lo, hi = _squeezed_sphere()
+    w.track_load_peak(1.0)  # 1 m of plate travel: never reached
+    w.run_until(max_steps=10_000, wall_travel_above=(lo, 0.3 * R))
+    assert w.load_force > 0 and w.load_peak == 0.0
+    for k, vz in ((lo, -0.2), (hi, 0.2)):
+        w.set_wall_velocity(k, [0, 0, vz])
+    out = w.run_until(max_steps=3_000, load_drop_below=0.5)
+    assert out.reason == "max_steps"  # no peak kept, nothing to fall from
+    with pytest.raises(pd.ParameterError, match="load_drop_below"):
+        w.run_until(max_steps=10, load_drop_below=1.5)
+    w.set_load_walls([])
+    with pytest.raises(pd.ParameterError, match="load walls"):
+        w.run_until(max_steps=10, load_drop_below=0.5)
+
+
 def test_moving_plane_and_growing_cylinder_follow_their_program():
     w = pd.World(dt=1e-6, contact=pd.ContactLaw(), gravity=(0, 0, 0), skin=2e-5, sample_interval=10)
     w.add_particles(np.array([[0, 0, 1e-3]]), np.array([R]))

@@ -271,6 +271,8 @@ py::dict state_to_dict(const WorldState& s) {
   py::dict d;
   d["time"] = s.time; d["step"] = s.step; d["ramp_start"] = s.ramp_start; d["ramp_duration"] = s.ramp_duration;
   d["max_overlap_seen"] = s.max_overlap_seen; d["forces_valid"] = s.forces_valid;
+  d["load_peak_from"] = s.load_peak_from; d["load_peak"] = s.load_peak;
+  d["load_smoothing"] = s.load_smoothing; d["load_smoothed"] = s.load_smoothed;
   d["x"] = copy_vec3(s.x); d["v"] = copy_vec3(s.v); d["w"] = copy_vec3(s.w); d["f"] = copy_vec3(s.f); d["t"] = copy_vec3(s.t);
   d["r"] = copy_vector(s.r); d["m"] = copy_vector(s.m);
   d["contact_i"] = copy_vector(s.ci); d["contact_j"] = copy_vector(s.cj);
@@ -305,6 +307,11 @@ WorldState state_from_dict(const py::dict& d) {
   s.time = d["time"].cast<double>(); s.step = d["step"].cast<long>();
   s.ramp_start = d["ramp_start"].cast<double>(); s.ramp_duration = d["ramp_duration"].cast<double>();
   s.max_overlap_seen = d["max_overlap_seen"].cast<double>(); s.forces_valid = d["forces_valid"].cast<bool>();
+  // The tracked load peak arrived after checkpoint format 1: older files tracked none.
+  if (d.contains("load_peak_from")) s.load_peak_from = d["load_peak_from"].cast<double>();
+  if (d.contains("load_peak")) s.load_peak = d["load_peak"].cast<double>();
+  if (d.contains("load_smoothing")) s.load_smoothing = d["load_smoothing"].cast<double>();
+  if (d.contains("load_smoothed")) s.load_smoothed = d["load_smoothed"].cast<double>();
   s.x = vec3_from(d, "x"); s.v = vec3_from(d, "v"); s.w = vec3_from(d, "w"); s.f = vec3_from(d, "f"); s.t = vec3_from(d, "t");
   s.r = from_array<double>(d, "r"); s.m = from_array<double>(d, "m");
   s.ci = from_array<Index>(d, "contact_i"); s.cj = from_array<Index>(d, "contact_j");
@@ -475,7 +482,8 @@ PYBIND11_MODULE(_core, m) {
       .value("WallForceAbove", StopKind::WallForceAbove)
       .value("WallForceBelow", StopKind::WallForceBelow)
       .value("WallTravelAbove", StopKind::WallTravelAbove)
-      .value("LoadMarkerAbove", StopKind::LoadMarkerAbove);
+      .value("LoadMarkerAbove", StopKind::LoadMarkerAbove)
+      .value("LoadDropBelow", StopKind::LoadDropBelow);
 
   py::class_<StopCondition>(m, "StopCondition")
       .def(py::init([](StopKind kind, double value, int wall, long check_interval) {
@@ -515,6 +523,12 @@ PYBIND11_MODULE(_core, m) {
                  !std::isfinite(s.ramp_duration) || !std::isfinite(s.max_overlap_seen))
                throw ParameterError(cat("state: time = ", s.time, " s, step = ", s.step,
                                         ", ramp and max_overlap_seen must be finite (step >= 0)"));
+             if (std::isnan(s.load_peak_from) || !std::isfinite(s.load_peak) || s.load_peak < 0.0 ||
+                 !(s.load_smoothing >= 1.0 && s.load_smoothing <= 1e9) || !std::isfinite(s.load_smoothed))
+               throw ParameterError(cat("state: load_peak = ", s.load_peak, " N must be finite and >= 0, ",
+                                        "load_peak_from = ", s.load_peak_from, " m must not be NaN, ",
+                                        "load_smoothing = ", s.load_smoothing, " steps must be in [1, 1e9], ",
+                                        "load_smoothed = ", s.load_smoothed, " N must be finite"));
              // What load_state does not check itself, checked before it changes anything (it
              // checks load walls only after taking the new walls, which would leave half a state).
              for (int k : s.load_walls)
@@ -663,6 +677,15 @@ PYBIND11_MODULE(_core, m) {
       .def_property_readonly("max_overlap_ratio_seen", &World::max_overlap_ratio_seen)
       .def("reset_max_overlap_seen", &World::reset_max_overlap_seen)
       .def_property_readonly("load_marker", &World::load_marker)
+      .def_property_readonly("load_force", &World::load_force,
+                             "Mean compressive normal force of the load walls, N.")
+      .def_property_readonly("load_peak", &World::load_peak,
+                             "Largest load_smoothed since track_load_peak's marker was reached, N.")
+      .def_property_readonly("load_smoothed", &World::load_smoothed,
+                             "load_force averaged over track_load_peak's smoothing_steps, N.")
+      .def("track_load_peak", &World::track_load_peak, py::arg("from_marker"), py::arg("smoothing_steps") = 1.0,
+           "Average the load force over ~smoothing_steps steps and keep its peak from the load marker "
+           "from_marker (m) on, for the load_drop_below stop (inf: stop keeping them).")
       .def("critical_time_step", &World::critical_time_step)
       .def_property_readonly("rebuild_count", &World::rebuild_count)
       .def_property_readonly("pair_list_size", [](const World& w) { return w.neighbors().pair_count(); })

@@ -12,6 +12,10 @@ WorldState World::save_state() const {
   s.ramp_start = ramp_start_;
   s.ramp_duration = ramp_duration_;
   s.max_overlap_seen = max_overlap_seen_;
+  s.load_peak_from = load_peak_from_;
+  s.load_peak = load_peak_;
+  s.load_smoothing = load_smoothing_;
+  s.load_smoothed = load_smoothed_;
   s.forces_valid = forces_valid_;
   s.x = p_.x; s.v = p_.v; s.w = p_.w; s.f = p_.f; s.t = p_.t;
   s.r = p_.r; s.m = p_.m;
@@ -80,6 +84,10 @@ void World::load_state(const WorldState& s) {
   ramp_start_ = s.ramp_start;
   ramp_duration_ = s.ramp_duration;
   max_overlap_seen_ = s.max_overlap_seen;
+  load_peak_from_ = s.load_peak_from;
+  load_peak_ = s.load_peak;
+  load_smoothing_ = s.load_smoothing;
+  load_smoothed_ = s.load_smoothed;
   samples_.clear();
   // A fresh list at the saved positions holds every pair in contact; give them their history.
   nbr_ = NeighborList{};

@@ -137,7 +137,8 @@ class StopKind:
     Time [s], Steps [steps in this call], KineticEnergyBelow [J, scaled mass],
     InternalKineticEnergyBelow [J, about the centre of mass], WallForceAbove and
     WallForceBelow [N, compressive normal force on the wall], WallTravelAbove [m, along the
-    wall's normal], LoadMarkerAbove [m, summed travel of the load walls].
+    wall's normal], LoadMarkerAbove [m, summed travel of the load walls], LoadDropBelow
+    [fraction 0..1 of the load peak kept since World.track_load_peak].
     """
 
     Time: ClassVar[StopKind]
@@ -148,6 +149,7 @@ class StopKind:
     WallForceBelow: ClassVar[StopKind]
     WallTravelAbove: ClassVar[StopKind]
     LoadMarkerAbove: ClassVar[StopKind]
+    LoadDropBelow: ClassVar[StopKind]
     __members__: ClassVar[dict[str, StopKind]]
     def __init__(self, value: int) -> None: ...
     @overload
@@ -324,6 +326,17 @@ class World:
     @property
     def load_marker(self) -> float:
         """Summed travel of the load walls, m."""
+    @property
+    def load_force(self) -> float:
+        """Mean compressive normal force of the load walls, N."""
+    @property
+    def load_peak(self) -> float:
+        """Largest load_smoothed since track_load_peak's marker was reached, N."""
+    @property
+    def load_smoothed(self) -> float:
+        """load_force averaged over track_load_peak's smoothing_steps, N."""
+    def track_load_peak(self, from_marker: float, smoothing_steps: float = 1.0) -> None:
+        """Average the load force over ~smoothing_steps steps and keep its peak from the load marker from_marker (m) on, for the load_drop_below stop (inf: stop keeping them)."""
     def critical_time_step(self) -> float:
         """Stability limit of the stiffest contact on the lightest particle, s."""
     @property

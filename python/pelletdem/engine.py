@@ -138,6 +138,7 @@ _CONDITIONS = {
     "wall_force_below": StopKind.WallForceBelow,
     "wall_travel_above": StopKind.WallTravelAbove,
     "load_marker_above": StopKind.LoadMarkerAbove,
+    "load_drop_below": StopKind.LoadDropBelow,
 }
 
 
@@ -204,7 +205,9 @@ class World:
         Conditions (keyword=value): time (s), steps, kinetic_energy_below (J, scaled mass),
         internal_kinetic_energy_below (J, about the centre of mass),
         wall_force_above=(wall, N), wall_force_below=(wall, N) (compressive normal force),
-        wall_travel_above=(wall, m), load_marker_above (m). kinetic_energy_below is tested
+        wall_travel_above=(wall, m), load_marker_above (m), load_drop_below (fraction in (0, 1):
+        the load walls' mean force has fallen to it times the peak kept since
+        track_load_peak; a test machine's break detection). kinetic_energy_below is tested
         every `check_interval` steps (it costs one pass over the particles).
 
         The run goes in chunks of about 0.1 s of wall time with the GIL released; between
@@ -223,6 +226,9 @@ class World:
                     raise ParameterError(f"{name} must be (wall index, value)")
                 wall, value = _int(f"{name} wall index", value[0], 0, 2**31 - 1), value[1]
             interval = check_interval if name.endswith("kinetic_energy_below") else 1
+            if name == "load_drop_below" and not (isinstance(value, (int, float)) and 0 < value < 1):
+                raise ParameterError(f"load_drop_below = {value!r} is out of range: allowed 0 < value < 1 "
+                                     "(fraction of the load peak)")
             conds.append(_core.StopCondition(_CONDITIONS[name], _finite(name, value), wall,
                                              _int("check_interval", interval, 1, 10**9)))
             names.append(name)

@@ -23,7 +23,10 @@ class Preset:
     vibrations (-). relax_min_time: the relaxation runs at least this long before its
     kinetic-energy test, s. relax_max_time: the relaxation's time limit, s. bond_ramp_time:
     adhesion goes from full to zero over it, s. max_dLD: the diametral test ends at this
-    dL/D (-). sample_points: samples recorded per stage.
+    dL/D (-). break_drop: the diametral test ends earlier, once the plate force has fallen to
+    this fraction of its peak (a test machine's break detection; 0: off), the peak being
+    kept from dL/D = break_from_dLD on (skips the plates' first contacts) (-).
+    sample_points: samples recorded per stage.
     max_overlap_ratio: the engine's guard on overlap / radius (-). contact: the ContactLaw.
     Every field with its default and source: docs/parameters.md.
     """
@@ -50,6 +53,8 @@ class Preset:
     relax_max_time: float = 0.05
     bond_ramp_time: float = 0.004
     max_dLD: float = 0.1
+    break_drop: float = 0.0
+    break_from_dLD: float = 0.0
     sample_points: int = 400
     # Guard on overlap / radius. Wall contacts at 120 MPa exceed 0.75 r with the paper's linear
     # stiffness (15 N per particle on k1 = 1e5 N/m); analytic walls hold at any overlap, so the
@@ -62,6 +67,13 @@ class Preset:
         if not (isinstance(r, (int, float)) and 0.0 <= r <= 1.0):
             raise ParameterError(f"release_damping_ratio = {r!r} is out of range: allowed 0 <= "
                                  "release_damping_ratio <= 1 (fraction of critical damping)")
+        b = self.break_drop
+        if not (isinstance(b, (int, float)) and 0.0 <= b < 1.0):
+            raise ParameterError(f"break_drop = {b!r} is out of range: allowed 0 <= break_drop < 1 "
+                                 "(fraction of the peak plate force; 0 is off)")
+        f = self.break_from_dLD
+        if not (isinstance(f, (int, float)) and 0.0 <= f <= 0.5):
+            raise ParameterError(f"break_from_dLD = {f!r} is out of range: allowed 0 <= break_from_dLD <= 0.5")
 
     def with_(self, **changes) -> "Preset":
         """A copy with some fields changed (e.g. halved speeds for a quasi-static check)."""

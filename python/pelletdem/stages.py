@@ -488,6 +488,10 @@ def bond(pellet: Pellet, law: BondLaw, ramp_time: Optional[float] = None,
                        wall_time_s=time.perf_counter() - t0, steps=out.steps)
 
 
+# Plate approach (fraction of D) over which the break detection averages the plate force.
+BREAK_SMOOTHING_DLD = 0.0025
+
+
 def diametral(pellet: Pellet, speed: Optional[float] = None, max_dLD: Optional[float] = None,
               progress: Optional[bool] = None) -> StageResult:
     """Diametral compression between two plates parallel to the pellet's axis.
@@ -495,7 +499,9 @@ def diametral(pellet: Pellet, speed: Optional[float] = None, max_dLD: Optional[f
     Both plates move towards each other at speed/2 (m/s) so the pellet stays centred; dL is
     their approach. Records sigma_1 = P / (pi R_p h_p) (eq. 4, Pa) against dL/D, the tensile
     strength sigma_f (the peak, Pa), dL_f/D, and broken bonds against dL/D; the series end
-    at the step where the test stops.
+    at the step where the test stops: dL/D = max_dLD, or earlier where the preset's
+    break_drop > 0 and the plate force, averaged over dL/D = BREAK_SMOOTHING_DLD, has fallen
+    to break_drop times its peak (scalar ``stopped_on_break`` 1).
     """
     t0 = time.perf_counter()
     v = _check_positive("speed", pellet.preset.plate_speed if speed is None else speed, "m/s")
@@ -538,7 +544,15 @@ def diametral(pellet: Pellet, speed: Optional[float] = None, max_dLD: Optional[f
     max_steps = int((target + gap) / (v * w.dt)) + 1
     _sample_every(pellet, max_steps)
     n_broken0 = len(w.broken_bonds()["i"])
-    out = _run(pellet, "diametral", max_steps + 10, progress, load_marker_above=marker0 + target)
+    stop = {"load_marker_above": marker0 + target}
+    if pellet.preset.break_drop > 0.0:
+        # The force is averaged over 0.25 % of D of plate approach, the width the calibration's
+        # failure point smooths over, so one bond breaking is not taken for the break.
+        smoothing = max(1.0, BREAK_SMOOTHING_DLD * d / (v * w.dt))
+        w.track_load_peak(marker0 + pellet.preset.break_from_dLD * d, smoothing)
+        stop["load_drop_below"] = pellet.preset.break_drop
+    out = _run(pellet, "diametral", max_steps + 10, progress, **stop)
+    w.track_load_peak(math.inf)
     _close_series(w)
     w.set_wall_velocity(lo, (0.0, 0.0, 0.0))
     w.set_wall_velocity(hi, (0.0, 0.0, 0.0))
@@ -562,5 +576,6 @@ def diametral(pellet: Pellet, speed: Optional[float] = None, max_dLD: Optional[f
                  "dLf_D": float(dL_D[k]) if len(sigma_1) else float("nan"),
                  "diameter": d, "height": h, "plate_speed": v,
                  "bonds_broken": float(len(broken["i"]) - n_broken0),
-                 "bonds_intact": float(w.intact_bond_count())},
+                 "bonds_intact": float(w.intact_bond_count()),
+                 "stopped_on_break": float(out.reason == "load_drop_below")},
         wall_time_s=time.perf_counter() - t0, steps=out.steps)

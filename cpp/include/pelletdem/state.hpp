@@ -2,6 +2,7 @@
 // Everything that makes up a world's state, so a run can be saved and resumed bit for bit:
 // particles (with the forces of the last step, which the next half-kick uses), the history of
 // every contact, walls with their contact histories, bonds, broken bonds and the clock.
+#include <limits>
 #include <vector>
 
 #include "pelletdem/bonds.hpp"
@@ -14,6 +15,8 @@ struct WorldState {
   long step = 0;
   double ramp_start = 0.0, ramp_duration = -1.0;
   double max_overlap_seen = 0.0;
+  double load_peak_from = std::numeric_limits<double>::infinity(), load_peak = 0.0;
+  double load_smoothing = 1.0, load_smoothed = -1.0;
   bool forces_valid = false;
   std::vector<Vec3> x, v, w, f, t;
   std::vector<double> r, m;

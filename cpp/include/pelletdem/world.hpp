@@ -1,6 +1,7 @@
 #pragma once
 // The world: particles, walls, bonds, the contact table and the integrator. One call runs
 // thousands of steps; stop conditions are evaluated here, never in Python.
+#include <limits>
 #include <memory>
 #include <string>
 #include <vector>
@@ -37,6 +38,7 @@ enum class StopKind {
   WallForceBelow,        // wall's compressive normal force <= value, N
   WallTravelAbove,       // wall's travel along its normal >= value, m
   LoadMarkerAbove,       // load marker (sum of travels of load walls) >= value, m
+  LoadDropBelow,         // smoothed load force <= value * its peak (track_load_peak), 0 < value < 1
 };
 
 struct StopCondition {
@@ -116,6 +118,16 @@ class World {
   double max_overlap_ratio_seen() const { return max_overlap_seen_; }
   void reset_max_overlap_seen() { max_overlap_seen_ = 0.0; }
   double load_marker() const;
+  // Mean compressive normal force of the load walls, N (0 when there are none).
+  double load_force() const;
+  // The LoadDropBelow stop, a test machine's break detection: from now on the world keeps
+  // load_force() averaged over ~smoothing_steps steps (exponential mean, load_smoothed, N) and,
+  // from the step at which the load marker reaches from_marker (m), its largest value
+  // (load_peak, N). Both are part of the saved state: a resumed test stops where it would have.
+  // from_marker = inf stops keeping them.
+  void track_load_peak(double from_marker, double smoothing_steps = 1.0);
+  double load_peak() const { return load_peak_; }
+  double load_smoothed() const { return load_smoothed_ < 0.0 ? 0.0 : load_smoothed_; }
   double critical_time_step() const;
   // Threads a step uses: below kParallelMin particles one thread is faster than a team (the
   // fork/join and barrier cost exceeds the work), so small systems run serial.
@@ -198,6 +210,8 @@ class World {
   bool list_valid_ = false;
   bool vector_kernels_ = true;
   double ramp_start_ = 0.0, ramp_duration_ = -1.0;
+  double load_peak_from_ = std::numeric_limits<double>::infinity(), load_peak_ = 0.0;
+  double load_smoothing_ = 1.0, load_smoothed_ = -1.0;  // -1: no step averaged yet
   HystereticLaw law_;
 };
 
