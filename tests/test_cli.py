@@ -129,6 +129,8 @@ def test_cli_run_matches_the_pipeline(cli_run, tiny_life):
     (["run", "--out", "x", "--r-b", "0"], "--r-b"),
     (["run", "--out", "x", "--max-dld", "0.7"], "--max-dld"),
     (["run", "--out", "x", "--max-dld", "0"], "--max-dld"),
+    (["run", "--out", "x", "--break-drop", "1"], "--break-drop"),
+    (["run", "--out", "x", "--break-drop", "nan"], "--break-drop"),
     (["run", "--out", "", "--preset", "tiny"], "--out"),
     (["run", "--preset", "tiny"], "--out"),
     (["fly"], "command"),

@@ -21,7 +21,7 @@ import time
 
 # The arguments that define a run: a checkpoint made with other values is not resumed.
 RUN_ARGS = ("preset", "material", "mc", "sigma_z", "seed", "threads", "particles", "E_b", "sigma_c",
-            "tau_c", "r_b", "max_dld")
+            "tau_c", "r_b", "max_dld", "break_drop")
 
 
 def _bond_law(args):
@@ -75,6 +75,8 @@ def _run(args) -> int:
     preset = pipeline.get_preset(args.preset)
     if args.max_dld is not None:
         preset = preset.with_(max_dLD=args.max_dld)
+    if args.break_drop is not None:
+        preset = preset.with_(break_drop=args.break_drop)
     res = pipeline.run_pellet(preset=preset, material=args.material, mc=args.mc,
                               sigma_z_mpa=args.sigma_z, seed=args.seed, threads=args.threads,
                               bond_law=law, n_particles=args.particles,
@@ -120,6 +122,9 @@ def main(argv=None) -> int:
                    help="bond radius r_b, um (default 20)")
     r.add_argument("--max-dld", type=float, default=None, metavar="DL_D",
                    help="end of the diametral test, dL/D (0 < max_dld <= 0.5; default: the preset's)")
+    r.add_argument("--break-drop", type=float, default=None, metavar="FRACTION",
+                   help="end the diametral test earlier, once the plate force has fallen to this fraction "
+                        "of its peak (0 <= break_drop < 1; default 0: run to max_dld)")
     r.add_argument("--seed", type=int, default=0)
     r.add_argument("--threads", type=int, default=min(2, os.cpu_count() or 1))
     r.add_argument("--particles", type=int, default=None, help="override the preset's particle count")
@@ -163,6 +168,8 @@ def main(argv=None) -> int:
                      "for Table 5's bonds")
         if args.max_dld is not None and not 0.0 < args.max_dld <= 0.5:
             ap.error(f"--max-dld = {args.max_dld} is out of range: allowed 0 < max_dld <= 0.5")
+        if args.break_drop is not None and not 0.0 <= args.break_drop < 1.0:
+            ap.error(f"--break-drop = {args.break_drop} is out of range: allowed 0 <= break_drop < 1")
         if args.E_b is None and _variant_or_none(args) is None:
             ap.error(f"--sigma-z = {args.sigma_z:g} MPa (with --material {args.material}, --mc {args.mc}) "
                      f"has no Table 5 bonds: allowed 60 or 120 MPa, or give the bonds with --E-b and --sigma-c")

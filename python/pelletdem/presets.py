@@ -54,7 +54,7 @@ class Preset:
     bond_ramp_time: float = 0.004
     max_dLD: float = 0.1
     break_drop: float = 0.0
-    break_from_dLD: float = 0.0
+    break_from_dLD: float = 0.02
     sample_points: int = 400
     # Guard on overlap / radius. Wall contacts at 120 MPa exceed 0.75 r with the paper's linear
     # stiffness (15 N per particle on k1 = 1e5 N/m); analytic walls hold at any overlap, so the
