@@ -524,11 +524,12 @@ PYBIND11_MODULE(_core, m) {
                throw ParameterError(cat("state: time = ", s.time, " s, step = ", s.step,
                                         ", ramp and max_overlap_seen must be finite (step >= 0)"));
              if (std::isnan(s.load_peak_from) || !std::isfinite(s.load_peak) || s.load_peak < 0.0 ||
-                 !(s.load_smoothing >= 1.0 && s.load_smoothing <= 1e9) || !std::isfinite(s.load_smoothed))
+                 !(s.load_smoothing >= 1.0 && s.load_smoothing <= 1e9) || std::isnan(s.load_smoothed) ||
+                 s.load_smoothed == std::numeric_limits<double>::infinity())
                throw ParameterError(cat("state: load_peak = ", s.load_peak, " N must be finite and >= 0, ",
                                         "load_peak_from = ", s.load_peak_from, " m must not be NaN, ",
                                         "load_smoothing = ", s.load_smoothing, " steps must be in [1, 1e9], ",
-                                        "load_smoothed = ", s.load_smoothed, " N must be finite"));
+                                        "load_smoothed = ", s.load_smoothed, " N must be finite (-inf: none yet)"));
              // What load_state does not check itself, checked before it changes anything (it
              // checks load walls only after taking the new walls, which would leave half a state).
              for (int k : s.load_walls)

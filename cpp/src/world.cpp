@@ -325,11 +325,11 @@ void World::step() {
     p_.w[i] += (0.5 * dt * p_.inv_i[i]) * p_.t[i];
   }
   check_guards();
-  if (load_peak_from_ != std::numeric_limits<double>::infinity()) {
+  if (load_peak_from_ != kInf) {
     // Running mean over ~load_smoothing_ steps: the plate force of a small pellet jumps at
     // every bond that breaks, and the break detection must not take a jump for the break.
     const double f = load_force();
-    load_smoothed_ = load_smoothed_ < 0.0 ? f : load_smoothed_ + (f - load_smoothed_) / load_smoothing_;
+    load_smoothed_ = load_smoothed_ == -kInf ? f : load_smoothed_ + (f - load_smoothed_) / load_smoothing_;
     if (load_marker() >= load_peak_from_) load_peak_ = std::max(load_peak_, load_smoothed_);
   }
   if (step_ % params_.sample_interval == 0) record_sample();
@@ -406,7 +406,7 @@ void World::track_load_peak(double from_marker, double smoothing_steps) {
   require_range("track_load_peak smoothing_steps", smoothing_steps, 1.0, 1e9);
   load_peak_from_ = from_marker;
   load_smoothing_ = smoothing_steps;
-  load_smoothed_ = -1.0;
+  load_smoothed_ = -kInf;
   load_peak_ = 0.0;
 }
 

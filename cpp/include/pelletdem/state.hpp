@@ -16,7 +16,7 @@ struct WorldState {
   double ramp_start = 0.0, ramp_duration = -1.0;
   double max_overlap_seen = 0.0;
   double load_peak_from = std::numeric_limits<double>::infinity(), load_peak = 0.0;
-  double load_smoothing = 1.0, load_smoothed = -1.0;
+  double load_smoothing = 1.0, load_smoothed = -std::numeric_limits<double>::infinity();
   bool forces_valid = false;
   std::vector<Vec3> x, v, w, f, t;
   std::vector<double> r, m;

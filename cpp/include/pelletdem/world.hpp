@@ -127,7 +127,7 @@ class World {
   // from_marker = inf stops keeping them.
   void track_load_peak(double from_marker, double smoothing_steps = 1.0);
   double load_peak() const { return load_peak_; }
-  double load_smoothed() const { return load_smoothed_ < 0.0 ? 0.0 : load_smoothed_; }
+  double load_smoothed() const { return load_smoothed_ == -kInf ? 0.0 : load_smoothed_; }
   double critical_time_step() const;
   // Threads a step uses: below kParallelMin particles one thread is faster than a team (the
   // fork/join and barrier cost exceeds the work), so small systems run serial.
@@ -211,7 +211,9 @@ class World {
   bool vector_kernels_ = true;
   double ramp_start_ = 0.0, ramp_duration_ = -1.0;
   double load_peak_from_ = std::numeric_limits<double>::infinity(), load_peak_ = 0.0;
-  double load_smoothing_ = 1.0, load_smoothed_ = -1.0;  // -1: no step averaged yet
+  static constexpr double kInf = std::numeric_limits<double>::infinity();
+  // -inf: no step averaged yet (a plate with wall adhesion can pull: the force may be < 0)
+  double load_smoothing_ = 1.0, load_smoothed_ = -kInf;
   HystereticLaw law_;
 };
 
