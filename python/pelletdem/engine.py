@@ -226,9 +226,6 @@ class World:
                     raise ParameterError(f"{name} must be (wall index, value)")
                 wall, value = _int(f"{name} wall index", value[0], 0, 2**31 - 1), value[1]
             interval = check_interval if name.endswith("kinetic_energy_below") else 1
-            if name == "load_drop_below" and not (isinstance(value, (int, float)) and 0 < value < 1):
-                raise ParameterError(f"load_drop_below = {value!r} is out of range: allowed 0 < value < 1 "
-                                     "(fraction of the load peak)")
             conds.append(_core.StopCondition(_CONDITIONS[name], _finite(name, value), wall,
                                              _int("check_interval", interval, 1, 10**9)))
             names.append(name)
