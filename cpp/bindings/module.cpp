@@ -498,6 +498,9 @@ PYBIND11_MODULE(_core, m) {
   py::class_<World>(m, "World")
       .def(py::init<const WorldParams&>(), py::arg("params"))
       .def("clone", &World::clone)
+      .def("sort_particles", [](World& w) { return copy_vector(w.sort_particles()); },
+           "Renumber the particles in Morton order of their neighbour cells; returns the old "
+           "index of each new particle.")
       .def("get_state", [](const World& w) { return state_to_dict(w.save_state()); },
            "The whole state as a dict of numpy arrays (see pelletdem.checkpoint).")
       .def("set_state",

@@ -263,6 +263,11 @@ PELLETDEM_INLINE L4 load_run(Obj* const* g, std::size_t offset) {
   auto row = [&](int k) { return load4(reinterpret_cast<const char*>(g[k]) + offset); };
   return transpose(row(0), row(1), row(2), row(3));
 }
+// Positions and radii of xr[idx[0..3]] as columns (x, y, z, r): four aligned loads.
+PELLETDEM_INLINE L4 load_posrad(const PosRad* xr, const Index* idx) {
+  auto row = [&](int k) { return *reinterpret_cast<const Lane*>(xr + idx[k]); };
+  return transpose(row(0), row(1), row(2), row(3));
+}
 template <class Obj>
 PELLETDEM_INLINE void store_run(Obj* const* g, std::size_t offset, Lane c0, Lane c1, Lane c2, Lane c3) {
   const L4 r = transpose(c0, c1, c2, c3);
@@ -449,16 +454,15 @@ PELLETDEM_INLINE void contact_one(Index i, Index j, ContactHistory& h, const Par
 // without its optional effects (HystereticLaw::plain_pairs; k_2 is then constant and the
 // stiffness scale 1). The forces are added pair by pair in order, so the bits are contact_one's.
 PELLETDEM_INLINE void contact_group(const Index* gi, const Index* gj, ContactHistory* const* gh,
-                                    const Particles& p, const HystereticLaw& law,
+                                    const Particles& p, const PosRad* xr, const HystereticLaw& law,
                                     const ContactLawParams& cp, double dt_inc, double adh,
                                     const Vec3* roll_dir, const double* roll_cap, Vec3* F, Vec3* T,
                                     PairStats& out) {
   static_assert(sizeof(ContactHistory) == 4 * sizeof(double) && offsetof(ContactHistory, ft) == 8,
                 "ContactHistory is (delta0, ft) as four doubles");
-  const L3 xi = gather3(p.x, gi), xj = gather3(p.x, gj);
-  const Lane ri = gather([&](int k) { return p.r[gi[k]]; });
-  const Lane rj = gather([&](int k) { return p.r[gj[k]]; });
-  const L3 d{xj.x - xi.x, xj.y - xi.y, xj.z - xi.z};
+  const L4 pi = load_posrad(xr, gi), pj = load_posrad(xr, gj);
+  const Lane ri = pi.c3, rj = pj.c3;
+  const L3 d{pj.c0 - pi.c0, pj.c1 - pi.c1, pj.c2 - pi.c2};
   const Lane rsum = ri + rj;
   const Lane dist2 = lane_dot(d, d);
   Lane dist;
@@ -562,57 +566,89 @@ PELLETDEM_INLINE void contact_group(const Index* gi, const Index* gj, ContactHis
 
 }  // namespace
 
-// The pair loop over particles [lo, hi): the contact force of every listed pair that touches
-// (eq. 5-11), added to F and T; the history of pairs that came apart is cleared. Touching pairs
-// go four at a time through contact_group where the law allows (the rest through contact_one),
-// in pair order either way; copies for AVX2 and x86-64-v4 as the bond loop has.
+// The pair loop over particles [lo, hi), i.e. over their listed pairs [start[lo], start[hi]):
+// the contact force of every pair that touches (eq. 5-11), added to F and T; the history of
+// pairs that came apart is cleared. The touch test runs four pairs at a time on the packed
+// positions and radii (one aligned load per particle); touching pairs go four at a time through
+// contact_group where the law allows (the rest through contact_one), in pair order either way,
+// so the forces add up in the same order as one pair at a time. Copies for AVX2 and x86-64-v4
+// as the bond loop has.
 #if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && defined(__linux__)
 __attribute__((target_clones("arch=x86-64-v4", "avx2", "default")))
 #endif
-PairStats pair_loop(long lo, long hi, const Particles& p, NeighborList& nbr, const HystereticLaw& law,
-                    const ContactLawParams& cp, double dt_inc, double adh, const Vec3* roll_dir,
-                    const double* roll_cap, Vec3* F, Vec3* T, bool vector_kernel) {
+PairStats pair_loop(long lo, long hi, const Particles& p, const PosRad* xr, NeighborList& nbr,
+                    const HystereticLaw& law, const ContactLawParams& cp, double dt_inc, double adh,
+                    const Vec3* roll_dir, const double* roll_cap, Vec3* F, Vec3* T,
+                    bool vector_kernel) {
   PairStats out;
-#ifndef PELLETDEM_LANES
-  (void)vector_kernel;
-#else
-  const bool lanes = vector_kernel && law.plain_pairs();
-  Index gi[kLanes], gj[kLanes];
-  ContactHistory* gh[kLanes];
-  int m = 0;
-#endif
-  for (long i = lo; i < hi; ++i) {
-    const Vec3 xi = p.x[i];
-    const double ri = p.r[i];
-    for (Index k = nbr.start[i]; k < nbr.start[i + 1]; ++k) {
-      const Index j = nbr.j[k];
-      ContactHistory& h = nbr.history[k];
-      const Vec3 d = p.x[j] - xi;
-      const double rsum = ri + p.r[j];
-      const double dist2 = d.squaredNorm();
-      if (dist2 >= rsum * rsum) {
-        if (h.delta0 != 0.0 || h.ft.squaredNorm() != 0.0) h = ContactHistory{};
-        continue;
-      }
+  const Index k0 = nbr.start[lo], k1 = nbr.start[hi];
+  const Index* I = nbr.first.data();
+  const Index* J = nbr.j.data();
+  ContactHistory* H = nbr.history.data();
+  // The test written out as the four-lane one does it, so both paths see the same pairs touch.
+  auto touching = [&](Index k) {
+    const PosRad &a = xr[I[k]], &b = xr[J[k]];
+    const double dx = b.x - a.x, dy = b.y - a.y, dz = b.z - a.z, rsum = a.r + b.r;
+    return (dx * dx + dy * dy) + dz * dz < rsum * rsum;
+  };
+  auto apart = [&](Index k) {
+    ContactHistory& h = H[k];
+    if (h.delta0 != 0.0 || h.ft.squaredNorm() != 0.0) h = ContactHistory{};
+  };
+  auto one = [&](Index k) {
+    contact_one(I[k], J[k], H[k], p, law, cp, dt_inc, adh, roll_dir, roll_cap, F, T, out);
+  };
 #ifdef PELLETDEM_LANES
-      if (lanes) {
-        gi[m] = static_cast<Index>(i);
-        gj[m] = j;
-        gh[m] = &h;
-        if (++m == kLanes) {
-          contact_group(gi, gj, gh, p, law, cp, dt_inc, adh, roll_dir, roll_cap, F, T, out);
-          m = 0;
+  if (vector_kernel && law.plain_pairs()) {
+    // Touching pairs queue up in `buf` (the test appends without a branch) and leave it four
+    // at a time. contact_group is written out at one place only: inlined at several, the loop
+    // outgrew the instruction cache and ran at half speed.
+    Index buf[2 * kLanes];
+    int nb = 0;
+    Index k = k0;
+    for (;;) {
+      while (nb < kLanes && k < k1) {
+        if (k + kLanes <= k1) {
+          const L4 a = load_posrad(xr, I + k), b = load_posrad(xr, J + k);
+          const Lane dx = b.c0 - a.c0, dy = b.c1 - a.c1, dz = b.c2 - a.c2, rsum = a.c3 + b.c3;
+          const LaneMask on = (dx * dx + dy * dy) + dz * dz < rsum * rsum;
+          for (int l = 0; l < kLanes; ++l) {
+            buf[nb] = k + l;
+            nb += static_cast<int>(on[l] & 1);
+            if (!on[l]) apart(k + l);
+          }
+          k += kLanes;
+        } else {
+          const bool on = touching(k);
+          buf[nb] = k;
+          nb += on;
+          if (!on) apart(k);
+          ++k;
         }
-        continue;
       }
-#endif
-      contact_one(static_cast<Index>(i), j, h, p, law, cp, dt_inc, adh, roll_dir, roll_cap, F, T, out);
+      if (nb < kLanes) break;
+      Index gi[kLanes], gj[kLanes];
+      ContactHistory* gh[kLanes];
+      for (int l = 0; l < kLanes; ++l) {
+        gi[l] = I[buf[l]];
+        gj[l] = J[buf[l]];
+        gh[l] = H + buf[l];
+      }
+      contact_group(gi, gj, gh, p, xr, law, cp, dt_inc, adh, roll_dir, roll_cap, F, T, out);
+      for (int l = kLanes; l < nb; ++l) buf[l - kLanes] = buf[l];
+      nb -= kLanes;
     }
+    for (int l = 0; l < nb; ++l) one(buf[l]);
+    return out;
   }
-#ifdef PELLETDEM_LANES
-  for (int k = 0; k < m; ++k)
-    contact_one(gi[k], gj[k], *gh[k], p, law, cp, dt_inc, adh, roll_dir, roll_cap, F, T, out);
 #endif
+  (void)vector_kernel;
+  for (Index k = k0; k < k1; ++k) {
+    if (touching(k))
+      one(k);
+    else
+      apart(k);
+  }
   return out;
 }
 
@@ -655,6 +691,13 @@ void bond_loop(std::vector<Bond>& bonds, long lo, long hi, const Particles& p, d
 #endif
 }
 
+void World::size_particle_scratch() {
+  const std::size_t n = p_.size();
+  roll_dir_.resize(n, Vec3::Zero());
+  roll_cap_.resize(n, 0.0);
+  xr_.resize(n);
+}
+
 double World::adhesion_scale() const {
   if (ramp_duration_ < 0.0 || time_ < ramp_start_) return 1.0;
   if (ramp_duration_ == 0.0) return 0.0;
@@ -672,8 +715,7 @@ void World::compute_forces(bool advance) {
     buf_f_[k].resize(n);
     buf_t_[k].resize(n);
   }
-  roll_dir_.resize(n, Vec3::Zero());
-  roll_cap_.resize(n, 0.0);
+  size_particle_scratch();
   const double dt = params_.dt;
   // Incremental springs advance by v dt only when the particles moved since the last force
   // evaluation; a recomputation in place (after set_velocities, a new wall, a restored state)
@@ -697,19 +739,13 @@ void World::compute_forces(bool advance) {
       std::fill(buf_f_[tid - 1].begin(), buf_f_[tid - 1].end(), Vec3::Zero());
       std::fill(buf_t_[tid - 1].begin(), buf_t_[tid - 1].end(), Vec3::Zero());
     }
+    if (!prepared_) {
 #pragma omp for schedule(static)
-    for (long i = 0; i < n; ++i) {
-      p_.f[i].setZero();
-      p_.t[i].setZero();
-      if (cp.rolling > 0.0) {
-        const double wl = p_.w[i].norm();
-        roll_cap_[i] = wl / (dt * p_.inv_i[i]);
-        roll_dir_[i] = wl == 0.0 ? Vec3::Zero() : Vec3(p_.w[i] / wl);
-      }
+      for (long i = 0; i < n; ++i) prepare_particle(i);
     }
     long lo, hi;
     static_share(n, nt, tid, lo, hi);
-    const PairStats ps = pair_loop(lo, hi, p_, nbr_, law_, cp, dt_inc, adh, roll_dir_.data(),
+    const PairStats ps = pair_loop(lo, hi, p_, xr_.data(), nbr_, law_, cp, dt_inc, adh, roll_dir_.data(),
                                    roll_cap_.data(), F, T, vector_kernels_);
     // A thread's bonds add to its own buffers, so it goes on to them without waiting for the
     // others' pairs; the reduction below waits for all.
@@ -761,6 +797,7 @@ void World::compute_forces(bool advance) {
   }
   wall_forces(advance);
   max_overlap_seen_ = std::max(max_overlap_seen_, max_overlap_);
+  prepared_ = false;
 }
 
 void World::wall_forces(bool advance) {

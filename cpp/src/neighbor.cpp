@@ -95,6 +95,7 @@ void NeighborList::build(const Particles& p, const Box& box, double skin, double
   new_start_.assign(n + 1, 0);
   for (std::size_t i = 0; i < n; ++i) new_start_[i + 1] = new_start_[i] + counts_[i + 1];
   new_j_.resize(new_start_[n]);
+  new_first_.resize(new_start_[n]);
   new_history_.assign(new_start_[n], ContactHistory{});
   const bool have_old = start.size() == n + 1;
 #pragma omp parallel for schedule(static) num_threads(threads)
@@ -103,6 +104,8 @@ void NeighborList::build(const Particles& p, const Box& box, double skin, double
     Index k = 0;
     visit(static_cast<std::size_t>(i), [&](Index jj) { out[k++] = jj; });
     std::sort(out, out + k);
+    std::fill(new_first_.begin() + new_start_[i], new_first_.begin() + new_start_[i + 1],
+              static_cast<Index>(i));
     if (!have_old) continue;
     // Linear merge of the old and the new sorted slices carries the history over.
     Index a = start[i], a_end = start[i + 1];
@@ -113,6 +116,7 @@ void NeighborList::build(const Particles& p, const Box& box, double skin, double
   }
   start.swap(new_start_);
   j.swap(new_j_);
+  first.swap(new_first_);
   history.swap(new_history_);
 }
 

@@ -297,6 +297,7 @@ void World::step() {
   const long n = static_cast<long>(p_.size());
   const double dt = params_.dt;
   ensure_forces();
+  size_particle_scratch();
   double max_disp2 = 0.0;
   long bad = -1;
   const int nt = team();
@@ -308,7 +309,10 @@ void World::step() {
     p_.x[i] += dt * p_.v[i];
     if (!p_.x[i].allFinite()) bad = std::max(bad, i);
     max_disp2 = std::max(max_disp2, (p_.x[i] - x_build_[i]).squaredNorm());
+    prepare_particle(i);
   }
+  // The forces are zeroed now: should anything below throw, the next step recomputes them.
+  forces_valid_ = false;
   if (bad >= 0)
     throw NonFiniteError(cat("particle ", bad, " has a non-finite position at step ", step_ + 1,
                              " (t = ", time_ + dt, " s): its velocity or force became NaN or "
@@ -318,7 +322,9 @@ void World::step() {
   if (needs_rebuild(std::sqrt(max_disp2))) rebuild();
   time_ += dt;
   ++step_;
+  prepared_ = true;
   compute_forces();
+  forces_valid_ = true;
 #pragma omp parallel for schedule(static) num_threads(nt)
   for (long i = 0; i < n; ++i) {
     p_.v[i] += (0.5 * dt * p_.inv_m[i]) * p_.f[i];

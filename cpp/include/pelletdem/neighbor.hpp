@@ -23,6 +23,7 @@ class NeighborList {
  public:
   std::vector<Index> start;              // start[i]..start[i+1]: pairs of particle i
   std::vector<Index> j;                  // second particle of each pair (j > i)
+  std::vector<Index> first;              // first particle i of each pair, for flat pair loops
   std::vector<ContactHistory> history;   // per pair, survives rebuilds
 
   std::size_t pair_count() const { return j.size(); }
@@ -37,7 +38,7 @@ class NeighborList {
 
  private:
   std::vector<Index> cell_start_, cell_items_, counts_;
-  std::vector<Index> new_start_, new_j_;
+  std::vector<Index> new_start_, new_j_, new_first_;
   std::vector<ContactHistory> new_history_;
 };
 

@@ -167,6 +167,12 @@ class World {
   // WorldParams; after it the next step is exactly the step the saved world would have taken.
   WorldState save_state() const;
   void load_state(const WorldState& s);
+  // Renumbers the particles in Morton order of their neighbour cells, so that particles in
+  // contact sit near each other in memory (a settled bed's pair loop then runs from cache).
+  // Everything moves with them: velocities, forces, contact and wall histories; the dynamics
+  // are the same up to the order in which forces add. Only before bonds exist, and with no
+  // numpy view of the arrays alive. Returns the old index of each new particle.
+  std::vector<Index> sort_particles();
 
   // --- restart support --------------------------------------------------------------------------
   void set_time(double t, long step) { time_ = t; step_ = step; }
@@ -174,6 +180,21 @@ class World {
 
  private:
   void ensure_forces();
+  // compute_forces' work on particle i before the pair loop: zero its force and torque, pack
+  // its position and radius, and its rolling-friction direction and cap (eq. 11). step() does
+  // it in its drift loop, which reads the same memory, and sets prepared_ so that
+  // compute_forces does not do it again.
+  PELLETDEM_INLINE void prepare_particle(long i) {
+    p_.f[i].setZero();
+    p_.t[i].setZero();
+    xr_[i] = PosRad{p_.x[i].x(), p_.x[i].y(), p_.x[i].z(), p_.r[i]};
+    if (params_.contact.rolling > 0.0) {
+      const double wl = p_.w[i].norm();
+      roll_cap_[i] = wl / (params_.dt * p_.inv_i[i]);
+      roll_dir_[i] = wl == 0.0 ? Vec3::Zero() : Vec3(p_.w[i] / wl);
+    }
+  }
+  void size_particle_scratch();
   void compute_forces(bool advance = true);
   void wall_forces(bool advance = true);
   void move_walls();
@@ -196,6 +217,8 @@ class World {
   // Per particle, this step's rolling-friction direction w/|w| and cap |w| / (dt / I) (eq. 11).
   std::vector<Vec3> roll_dir_;
   std::vector<double> roll_cap_;
+  // Positions and radii packed for the pair loop, refreshed by every force pass.
+  std::vector<PosRad> xr_;
   std::vector<int> load_walls_;
   std::vector<Sample> samples_;
   std::vector<std::vector<WallSample>> wall_samples_;
@@ -208,6 +231,7 @@ class World {
   Index max_overlap_i_ = 0;
   bool forces_valid_ = false;
   bool list_valid_ = false;
+  bool prepared_ = false;  // prepare_particle done for every particle since the last forces
   bool vector_kernels_ = true;
   double ramp_start_ = 0.0, ramp_duration_ = -1.0;
   double load_peak_from_ = std::numeric_limits<double>::infinity(), load_peak_ = 0.0;
