@@ -37,6 +37,9 @@ import platform
 import sys
 import time
 
+# numpy's OpenBLAS threads spin for a while after a call and took 2-3 % of a core in the
+# profiles, enough to disturb the two-thread timings on a 2-core machine.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import numpy as np
 
 import pelletdem as pd
@@ -77,6 +80,7 @@ def build_bed(n: int, cn_target: float, piston_speed: float, max_stress: float, 
                   f"sigma_z = {sigma / 1e6:6.1f} MPa", flush=True)
     w.set_wall_velocity(piston, (0, 0, 0))
     w.run(1000)  # let the bed settle under the held piston
+    w.sort_particles()  # neighbours in memory, as stages.fill leaves a pellet's particles
     info = {"n": w.n, "cn": w.coordination_number(), "contacts": w.contact_count,
             "sigma_z_MPa": w.wall_state(piston)["normal_force"] / area / 1e6,
             "height_mm": w.wall_state(piston)["point"][2] * 1e3,

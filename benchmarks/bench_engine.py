@@ -26,6 +26,9 @@ import subprocess
 import sys
 import time
 
+# numpy's OpenBLAS threads spin for a while after a call and took 2-3 % of a core in the
+# profiles, enough to disturb the two-thread timings on a 2-core machine.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import numpy as np
 
 HERE = os.path.dirname(os.path.abspath(__file__))
@@ -44,7 +47,7 @@ def settled_bed(n: int, seed: int = 1):
     path = os.path.join(CACHE, f"bed_{n}_{seed}.npz")
     if os.path.exists(path):
         d = np.load(path)
-        return d["x"], d["r"]
+        return _morton(d["x"], d["r"])
     from pelletdem import stages
 
     pellet, res = stages.fill(_preset(n), seed=seed, threads=2, progress=False)
@@ -53,6 +56,14 @@ def settled_bed(n: int, seed: int = 1):
     print(f"# settled bed of {n}: {res.steps} steps, {res.wall_time_s:.1f} s, CN {res.scalars['coordination_number']:.2f}",
           flush=True)
     return x, r
+
+
+def _morton(x, r):
+    """The bed renumbered by World.sort_particles (as stages.fill leaves a pellet; a bed cached
+    by an older fill may be in another order)."""
+    w = _world(x, r, 1)
+    order = w.sort_particles()
+    return x[order], r[order]
 
 
 def _world(x, r, threads):

@@ -109,6 +109,56 @@ def test_vector_kernels_give_the_scalar_kernels_bits(n_side, threads):
         assert np.array_equal(v, b.broken_bonds()[k]), k
 
 
+def test_sorting_particles_permutes_the_state_and_keeps_the_dynamics():
+    """sort_particles renumbers the particles: the state is the old one permuted (bit for bit,
+    tangential springs turned where a pair's ends swap), and the run goes on as the unsorted
+    one does, to round-off (forces add in another order), like a change of thread count."""
+    a = dense_lattice(8, threads=1)
+    a.set_sample_interval(50)
+    a.run(100)
+    b = a.clone()
+    order = b.sort_particles()
+    assert sorted(order.tolist()) == list(range(a.n))
+    assert not np.array_equal(order, np.arange(a.n))
+    assert np.array_equal(b.positions(), a.positions()[order])
+    assert np.array_equal(b.velocities(), a.velocities()[order])
+    assert np.array_equal(np.array(b.f), np.array(a.f)[order])
+    assert np.array_equal(np.array(b.r), np.array(a.r)[order])
+    assert len(b.samples()["time"]) == len(a.samples()["time"]) > 0
+    sa, sb = a.get_state(), b.get_state()
+    renum = np.empty(a.n, dtype=np.int64)
+    renum[order] = np.arange(a.n)
+    old = {}
+    for i, j, d0, ft in zip(sa["contact_i"], sa["contact_j"], sa["contact_delta0"], sa["contact_ft"]):
+        ni, nj = renum[i], renum[j]
+        old[(min(ni, nj), max(ni, nj))] = (d0, ft if ni < nj else -ft)
+    new = {(i, j): (d0, ft) for i, j, d0, ft in
+           zip(sb["contact_i"], sb["contact_j"], sb["contact_delta0"], sb["contact_ft"])}
+    assert len(new) == len(old) > 0
+    for key, (d0, ft) in old.items():
+        assert new[key][0] == d0 and np.array_equal(new[key][1], ft)
+    a.run(200)
+    b.run(200)
+    assert a.coordination_number() > 4.0
+    assert np.abs(b.positions() - a.positions()[order]).max() < 1e-14
+    assert np.abs(b.velocities() - a.velocities()[order]).max() < 1e-10
+    assert a.contact_count == b.contact_count
+    assert np.allclose(b.wall_state(0)["force"], a.wall_state(0)["force"], rtol=1e-9, atol=1e-12)
+
+
+def test_sorting_particles_is_refused_with_bonds_or_live_views():
+    w = dense_lattice(4, threads=1)
+    view = np.asarray(w.x)
+    with pytest.raises(pd.ParameterError, match="numpy views"):
+        w.sort_particles()
+    del view
+    w.sort_particles()
+    w.run(10)
+    w.create_bonds(pd.BondLaw().to_core())
+    with pytest.raises(pd.ParameterError, match="before bonds"):
+        w.sort_particles()
+
+
 # --- whole pellets: sigma_f at another thread count ----------------------------------------------
 
 def test_thread_count_does_not_change_the_tiny_pellet(tiny_life):

@@ -197,6 +197,8 @@ class World:
     def __init__(self, params: WorldParams) -> None: ...
     def clone(self) -> World:
         """Deep copy of the whole state (particles, contact history, walls, bonds)."""
+    def sort_particles(self) -> _IndexArray:
+        """Renumber the particles in Morton order of their neighbour cells; returns the old index of each new particle."""
 
     # state
     def get_state(self) -> dict[str, Any]:

@@ -258,6 +258,15 @@ class World:
         new.box = self.box
         return new
 
+    def sort_particles(self) -> np.ndarray:
+        """Renumber the particles so that neighbours in space are neighbours in memory (Morton
+        order of the neighbour cells); the pair loop then runs from cache, ~5-15 % faster on a
+        settled bed. Velocities, forces, contact and wall histories move with the particles and
+        the time series are kept. Allowed only before bonds are created and while no numpy view
+        of the particle arrays (``np.asarray(world.x)``) is alive. Returns ``order`` (N,): new
+        particle k was particle ``order[k]``."""
+        return self._core.sort_particles()
+
     # --- time series: the engine's samples, after any restored from a saved state -------------
     def samples(self) -> dict:
         """The global time series since the last clear_samples(), as arrays: time (s),

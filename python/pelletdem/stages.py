@@ -235,7 +235,7 @@ def fill(preset: Preset, seed: int = 0, threads: int = 1, n_particles: Optional[
         "mould": world.add_cylinder("mould", (0.0, 0.0, 0.0), R),
         "piston": world.add_plane("piston", (0.0, 0.0, fill_height + 2.0 * preset.radius_max), (0.0, 0.0, -1.0)),
     }
-    masses = np.asarray(world.m)
+    masses = np.array(world.m)  # a copy: sort_particles below refuses while views are alive
     pellet = Pellet(world, preset, walls, R, float(masses.sum() / preset.density_scale))
     # Free fall of the bed under g takes sqrt(2 h / g); allow four times that.
     world.gravity = (0.0, 0.0, -9.81 * preset.fill_gravity_factor / 1.0)
@@ -252,6 +252,9 @@ def fill(preset: Preset, seed: int = 0, threads: int = 1, n_particles: Optional[
     out = _run(pellet, "fill", max_steps - fall.steps, progress, kinetic_energy_below=ke_rest,
                check_interval=100)
     world.gravity = (0.0, 0.0, -9.81)
+    # The bed has settled: renumber its particles so that neighbours in space are neighbours in
+    # memory for the stages that follow (on a 40,000 bed ~20 % faster on one thread, ~2x on two).
+    world.sort_particles()
     s = world.samples()
     xs, rs = np.asarray(world.x), np.asarray(world.r)
     pellet.h0 = float((xs[:, 2] + rs).max())
