@@ -268,6 +268,15 @@ PELLETDEM_INLINE L4 load_posrad(const PosRad* xr, const Index* idx) {
   auto row = [&](int k) { return *reinterpret_cast<const Lane*>(xr + idx[k]); };
   return transpose(row(0), row(1), row(2), row(3));
 }
+// Run `offset` (a byte offset of a run of four doubles in Motion) of mo[idx[0..3]] as columns.
+constexpr std::size_t kRunVel = offsetof(Motion, vx), kRunSpin = offsetof(Motion, wx),
+                      kRunRoll = offsetof(Motion, dx);
+PELLETDEM_INLINE L4 load_motion(const Motion* mo, const Index* idx, std::size_t offset) {
+  auto row = [&](int k) {
+    return *reinterpret_cast<const Lane*>(reinterpret_cast<const char*>(mo + idx[k]) + offset);
+  };
+  return transpose(row(0), row(1), row(2), row(3));
+}
 template <class Obj>
 PELLETDEM_INLINE void store_run(Obj* const* g, std::size_t offset, Lane c0, Lane c1, Lane c2, Lane c3) {
   const L4 r = transpose(c0, c1, c2, c3);
@@ -288,15 +297,16 @@ PELLETDEM_INLINE bool lane_all(LaneMask m) {
 
 // Updates the kLanes intact bonds g[0..] and adds their forces and torques to F and T in bond
 // order. Returns false, having changed nothing, when a bond needs the scalar path.
-PELLETDEM_INLINE bool update_bond_group(Bond* const* g, const Particles& p, double dt, Vec3* F,
-                                        Vec3* T) {
+PELLETDEM_INLINE bool update_bond_group(Bond* const* g, const PosRad* xr, const Motion* mo,
+                                        double dt, Vec3* F, Vec3* T) {
   Index bi[kLanes], bj[kLanes];
   for (int k = 0; k < kLanes; ++k) {
     bi[k] = g[k]->i;
     bj[k] = g[k]->j;
   }
   // Particle values are gathered just before they are needed, which keeps the registers free.
-  const L3 xi = gather3(p.x, bi), xj = gather3(p.x, bj);
+  const L4 pi = load_posrad(xr, bi), pj = load_posrad(xr, bj);
+  const L3 xi{pi.c0, pi.c1, pi.c2}, xj{pj.c0, pj.c1, pj.c2};
   const L4 run_n = load_run(g, kRunNormal), run_s = load_run(g, kRunShear), run_b = load_run(g, kRunBend);
   const L3 np{run_n.c0, run_n.c1, run_n.c2};
   L3 ft{run_s.c0, run_s.c1, run_s.c2};
@@ -324,7 +334,8 @@ PELLETDEM_INLINE bool update_bond_group(Bond* const* g, const Particles& p, doub
     turn(ft);
     turn(mt);
   }
-  const L3 wi = gather3(p.w, bi), wj = gather3(p.w, bj);
+  const L4 spin_i = load_motion(mo, bi, kRunSpin), spin_j = load_motion(mo, bj, kRunSpin);
+  const L3 wi{spin_i.c0, spin_i.c1, spin_i.c2}, wj{spin_j.c0, spin_j.c1, spin_j.c2};
   const L3 ws{wi.x + wj.x, wi.y + wj.y, wi.z + wj.z};
   const Lane phi = 0.5 * lane_dot(ws, n) * dt;
   if (lane_any(lane_abs(phi) >= 1e-2)) return false;  // beyond the series (never in practice)
@@ -344,9 +355,9 @@ PELLETDEM_INLINE bool update_bond_group(Bond* const* g, const Particles& p, doub
     turn(ft);
     turn(mt);
   }
-  const L3 vi = gather3(p.v, bi), vj = gather3(p.v, bj);
-  const Lane ri = gather([&](int k) { return p.r[bi[k]]; });
-  const Lane rj = gather([&](int k) { return p.r[bj[k]]; });
+  const L4 vel_i = load_motion(mo, bi, kRunVel), vel_j = load_motion(mo, bj, kRunVel);
+  const L3 vi{vel_i.c0, vel_i.c1, vel_i.c2}, vj{vel_j.c0, vel_j.c1, vel_j.c2};
+  const Lane ri = pi.c3, rj = pj.c3;
   const Lane half_gap = 0.5 * (dist - ri - rj);
   const Lane ai = ri + half_gap, aj = rj + half_gap;
   const L3 lever{ai * wi.x + aj * wj.x, ai * wi.y + aj * wj.y, ai * wi.z + aj * wj.z};
@@ -420,7 +431,7 @@ namespace {
 // One touching pair (i, j) with its history h: the contact force of eq. 5-11 added to F and T.
 PELLETDEM_INLINE void contact_one(Index i, Index j, ContactHistory& h, const Particles& p,
                                   const HystereticLaw& law, const ContactLawParams& cp, double dt_inc,
-                                  double adh, const Vec3* roll_dir, const double* roll_cap, Vec3* F,
+                                  double adh, const Motion* mo, Vec3* F,
                                   Vec3* T, PairStats& out) {
   const double ri = p.r[i];
   const Vec3 d = p.x[j] - p.x[i];
@@ -438,8 +449,8 @@ PELLETDEM_INLINE void contact_one(Index i, Index j, ContactHistory& h, const Par
   F[j] += fj;
   F[i] -= fj;
   const Vec3 nxft = nv.cross(cf.ft);
-  T[i] += -ai * nxft + rolling_torque(cp.rolling, cf.fn, ri, roll_dir[i], roll_cap[i]);
-  T[j] += -aj * nxft + rolling_torque(cp.rolling, cf.fn, p.r[j], roll_dir[j], roll_cap[j]);
+  T[i] += -ai * nxft + rolling_torque(cp.rolling, cf.fn, ri, mo[i].roll_dir(), mo[i].roll_cap);
+  T[j] += -aj * nxft + rolling_torque(cp.rolling, cf.fn, p.r[j], mo[j].roll_dir(), mo[j].roll_cap);
   ++out.contacts;
   const double ov = delta / std::min(ri, p.r[j]);
   if (ov > out.max_ov) {
@@ -454,10 +465,9 @@ PELLETDEM_INLINE void contact_one(Index i, Index j, ContactHistory& h, const Par
 // without its optional effects (HystereticLaw::plain_pairs; k_2 is then constant and the
 // stiffness scale 1). The forces are added pair by pair in order, so the bits are contact_one's.
 PELLETDEM_INLINE void contact_group(const Index* gi, const Index* gj, ContactHistory* const* gh,
-                                    const Particles& p, const PosRad* xr, const HystereticLaw& law,
+                                    const PosRad* xr, const Motion* mo, const HystereticLaw& law,
                                     const ContactLawParams& cp, double dt_inc, double adh,
-                                    const Vec3* roll_dir, const double* roll_cap, Vec3* F, Vec3* T,
-                                    PairStats& out) {
+                                    Vec3* F, Vec3* T, PairStats& out) {
   static_assert(sizeof(ContactHistory) == 4 * sizeof(double) && offsetof(ContactHistory, ft) == 8,
                 "ContactHistory is (delta0, ft) as four doubles");
   const L4 pi = load_posrad(xr, gi), pj = load_posrad(xr, gj);
@@ -470,15 +480,16 @@ PELLETDEM_INLINE void contact_group(const Index* gi, const Index* gj, ContactHis
   const Lane delta = rsum - dist;
   const L3 nv{d.x / dist, d.y / dist, d.z / dist};
   const Lane ai = ri - 0.5 * delta, aj = rj - 0.5 * delta;
-  const L3 wi = gather3(p.w, gi), wj = gather3(p.w, gj);
+  const L4 spin_i = load_motion(mo, gi, kRunSpin), spin_j = load_motion(mo, gj, kRunSpin);
+  const L3 wi{spin_i.c0, spin_i.c1, spin_i.c2}, wj{spin_j.c0, spin_j.c1, spin_j.c2};
   const L3 lever{ai * wi.x + aj * wj.x, ai * wi.y + aj * wj.y, ai * wi.z + aj * wj.z};
   const L3 lxn = lane_cross(lever, nv);
-  const L3 vi = gather3(p.v, gi), vj = gather3(p.v, gj);
+  const L4 vel_i = load_motion(mo, gi, kRunVel), vel_j = load_motion(mo, gj, kRunVel);
+  const L3 vi{vel_i.c0, vel_i.c1, vel_i.c2}, vj{vel_j.c0, vel_j.c1, vel_j.c2};
   const L3 v_rel{(vj.x - vi.x) - lxn.x, (vj.y - vi.y) - lxn.y, (vj.z - vi.z) - lxn.z};
   const Lane vn = lane_dot(v_rel, nv);
   const L3 vt{v_rel.x - vn * nv.x, v_rel.y - vn * nv.y, v_rel.z - vn * nv.z};
-  const Lane mi = gather([&](int k) { return p.m[gi[k]]; });
-  const Lane mj = gather([&](int k) { return p.m[gj[k]]; });
+  const Lane mi = vel_i.c3, mj = vel_j.c3;
   const Lane m_eff = mi * mj / (mi + mj);
 
   // Eq. 5 (HystereticLaw::normal_force with scale 1 and constant k2).
@@ -535,9 +546,9 @@ PELLETDEM_INLINE void contact_group(const Index* gi, const Index* gj, ContactHis
   const Lane mai = -ai, maj = -aj;
   L3 ti{mai * nxft.x, mai * nxft.y, mai * nxft.z}, tj{maj * nxft.x, maj * nxft.y, maj * nxft.z};
   // Eq. 11 on each body (rolling_torque): zero, then added, where it does not apply.
-  const Lane capi = gather([&](int k) { return roll_cap[gi[k]]; });
-  const Lane capj = gather([&](int k) { return roll_cap[gj[k]]; });
-  const L3 diri = gather3(roll_dir, gi), dirj = gather3(roll_dir, gj);
+  const L4 roll_i = load_motion(mo, gi, kRunRoll), roll_j = load_motion(mo, gj, kRunRoll);
+  const Lane capi = spin_i.c3, capj = spin_j.c3;
+  const L3 diri{roll_i.c0, roll_i.c1, roll_i.c2}, dirj{roll_j.c0, roll_j.c1, roll_j.c2};
   auto roll = [&](Lane r, Lane cap, const L3& dir) {
     const LaneMask on = (cp.rolling > 0.0 ? ~LaneMask{} : LaneMask{}) & (fn > 0.0) & (cap != 0.0);
     const Lane mfr = cp.rolling * fn * r;
@@ -578,8 +589,7 @@ __attribute__((target_clones("arch=x86-64-v4", "avx2", "default")))
 #endif
 PairStats pair_loop(long lo, long hi, const Particles& p, const PosRad* xr, NeighborList& nbr,
                     const HystereticLaw& law, const ContactLawParams& cp, double dt_inc, double adh,
-                    const Vec3* roll_dir, const double* roll_cap, Vec3* F, Vec3* T,
-                    bool vector_kernel) {
+                    const Motion* mo, Vec3* F, Vec3* T, bool vector_kernel) {
   PairStats out;
   const Index k0 = nbr.start[lo], k1 = nbr.start[hi];
   const Index* I = nbr.first.data();
@@ -596,7 +606,7 @@ PairStats pair_loop(long lo, long hi, const Particles& p, const PosRad* xr, Neig
     if (h.delta0 != 0.0 || h.ft.squaredNorm() != 0.0) h = ContactHistory{};
   };
   auto one = [&](Index k) {
-    contact_one(I[k], J[k], H[k], p, law, cp, dt_inc, adh, roll_dir, roll_cap, F, T, out);
+    contact_one(I[k], J[k], H[k], p, law, cp, dt_inc, adh, mo, F, T, out);
   };
 #ifdef PELLETDEM_LANES
   if (vector_kernel && law.plain_pairs()) {
@@ -634,7 +644,7 @@ PairStats pair_loop(long lo, long hi, const Particles& p, const PosRad* xr, Neig
         gj[l] = J[buf[l]];
         gh[l] = H + buf[l];
       }
-      contact_group(gi, gj, gh, p, xr, law, cp, dt_inc, adh, roll_dir, roll_cap, F, T, out);
+      contact_group(gi, gj, gh, xr, mo, law, cp, dt_inc, adh, F, T, out);
       for (int l = kLanes; l < nb; ++l) buf[l - kLanes] = buf[l];
       nb -= kLanes;
     }
@@ -661,7 +671,8 @@ PairStats pair_loop(long lo, long hi, const Particles& p, const PosRad* xr, Neig
 #if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && defined(__linux__)
 __attribute__((target_clones("arch=x86-64-v4", "avx2", "default")))
 #endif
-void bond_loop(std::vector<Bond>& bonds, long lo, long hi, const Particles& p, double dt, Vec3* F,
+void bond_loop(std::vector<Bond>& bonds, long lo, long hi, const Particles& p, const PosRad* xr,
+               const Motion* mo, double dt, Vec3* F,
                Vec3* T, std::vector<long>& broke, bool vector_kernel) {
   auto one = [&](long b) {
     if (update_bond(bonds[b], p, dt, F, T)) broke.push_back(b);
@@ -680,12 +691,12 @@ void bond_loop(std::vector<Bond>& bonds, long lo, long hi, const Particles& p, d
     g[m] = &bonds[b];
     if (++m < kLanes) continue;
     m = 0;
-    if (!update_bond_group(g, p, dt, F, T))
+    if (!update_bond_group(g, xr, mo, dt, F, T))
       for (int k = 0; k < kLanes; ++k) one(idx[k]);
   }
   for (int k = 0; k < m; ++k) one(idx[k]);
 #else
-  (void)vector_kernel;
+  (void)vector_kernel, (void)xr, (void)mo;
   for (long b = lo; b < hi; ++b)
     if (bonds[b].mode == BondMode::Intact) one(b);
 #endif
@@ -693,9 +704,8 @@ void bond_loop(std::vector<Bond>& bonds, long lo, long hi, const Particles& p, d
 
 void World::size_particle_scratch() {
   const std::size_t n = p_.size();
-  roll_dir_.resize(n, Vec3::Zero());
-  roll_cap_.resize(n, 0.0);
   xr_.resize(n);
+  mo_.resize(n);
 }
 
 double World::adhesion_scale() const {
@@ -745,13 +755,14 @@ void World::compute_forces(bool advance) {
     }
     long lo, hi;
     static_share(n, nt, tid, lo, hi);
-    const PairStats ps = pair_loop(lo, hi, p_, xr_.data(), nbr_, law_, cp, dt_inc, adh, roll_dir_.data(),
-                                   roll_cap_.data(), F, T, vector_kernels_);
+    const PairStats ps = pair_loop(lo, hi, p_, xr_.data(), nbr_, law_, cp, dt_inc, adh, mo_.data(),
+                                   F, T, vector_kernels_);
     // A thread's bonds add to its own buffers, so it goes on to them without waiting for the
     // others' pairs; the reduction below waits for all.
     if (nbonds > 0) {
       static_share(nbonds, nt, tid, lo, hi);
-      bond_loop(bonds_, lo, hi, p_, dt_inc, F, T, broke_t[tid], vector_kernels_);
+      bond_loop(bonds_, lo, hi, p_, xr_.data(), mo_.data(), dt_inc, F, T, broke_t[tid],
+                vector_kernels_);
     }
 #pragma omp barrier
     contacts_t[tid] = ps.contacts;
@@ -844,7 +855,7 @@ void World::wall_forces(bool advance) {
         const Vec3 fp = cf.fn * n_into + cf.ft;
         p_.f[i] += fp;
         p_.t[i] += -a * n_into.cross(cf.ft) +
-                   rolling_torque(cp.rolling, cf.fn, p_.r[i], roll_dir_[i], roll_cap_[i]);
+                   rolling_torque(cp.rolling, cf.fn, p_.r[i], mo_[i].roll_dir(), mo_[i].roll_cap);
         const Vec3 contact_point = p_.x[i] - a * n_into;
         fsum -= fp;
         tsum += (contact_point - w.point).cross(-fp);

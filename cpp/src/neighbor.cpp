@@ -59,8 +59,6 @@ void NeighborList::build(const Particles& p, const Box& box, double skin, double
     for (std::size_t i = 0; i < n; ++i) cell_items_[fill[cell_id[i]]++] = static_cast<Index>(i);
   }
 
-  // Two passes over the same search: count, then fill, so each particle's slice is contiguous.
-  counts_.assign(n + 1, 0);
   auto visit = [&](std::size_t i, auto&& emit) {
     int cx, cy, cz;
     cell_of(p.x[i], cx, cy, cz);
@@ -86,32 +84,47 @@ void NeighborList::build(const Particles& p, const Box& box, double skin, double
       }
     }
   };
-#pragma omp parallel for schedule(static) num_threads(threads)
-  for (long i = 0; i < static_cast<long>(n); ++i) {
-    Index c = 0;
-    visit(static_cast<std::size_t>(i), [&](Index) { ++c; });
-    counts_[i + 1] = c;
-  }
+  // One search per particle: each thread lists the pairs of its contiguous share of particles
+  // into its own buffer (sorted by j per particle), then the shares are laid end to end.
+  // The list is the same whatever the thread count.
+  const int nt = std::max(1, std::min(threads, static_cast<int>(std::max<std::size_t>(n, 1))));
+  if (static_cast<int>(share_j_.size()) < nt) share_j_.resize(nt);
   new_start_.assign(n + 1, 0);
-  for (std::size_t i = 0; i < n; ++i) new_start_[i + 1] = new_start_[i] + counts_[i + 1];
-  new_j_.resize(new_start_[n]);
-  new_first_.resize(new_start_[n]);
-  new_history_.assign(new_start_[n], ContactHistory{});
   const bool have_old = start.size() == n + 1;
-#pragma omp parallel for schedule(static) num_threads(threads)
-  for (long i = 0; i < static_cast<long>(n); ++i) {
-    Index* out = new_j_.data() + new_start_[i];
-    Index k = 0;
-    visit(static_cast<std::size_t>(i), [&](Index jj) { out[k++] = jj; });
-    std::sort(out, out + k);
-    std::fill(new_first_.begin() + new_start_[i], new_first_.begin() + new_start_[i + 1],
-              static_cast<Index>(i));
-    if (!have_old) continue;
-    // Linear merge of the old and the new sorted slices carries the history over.
-    Index a = start[i], a_end = start[i + 1];
-    for (Index b = 0; b < k && a < a_end; ++b) {
-      while (a < a_end && j[a] < out[b]) ++a;
-      if (a < a_end && j[a] == out[b]) new_history_[new_start_[i] + b] = history[a];
+#pragma omp parallel num_threads(nt)
+  {
+    const int tid = omp_get_thread_num();
+    const long q = static_cast<long>(n) / nt, extra = static_cast<long>(n) % nt;
+    const long lo = q * tid + std::min<long>(tid, extra), hi = lo + q + (tid < extra ? 1 : 0);
+    std::vector<Index>& buf = share_j_[tid];
+    buf.clear();
+    for (long i = lo; i < hi; ++i) {
+      const std::size_t b0 = buf.size();
+      visit(static_cast<std::size_t>(i), [&](Index jj) { buf.push_back(jj); });
+      std::sort(buf.begin() + b0, buf.end());
+      new_start_[i + 1] = static_cast<Index>(buf.size() - b0);
+    }
+#pragma omp barrier
+#pragma omp single
+    {
+      for (std::size_t i = 0; i < n; ++i) new_start_[i + 1] += new_start_[i];
+      new_j_.resize(new_start_[n]);
+      new_first_.resize(new_start_[n]);
+      new_history_.assign(new_start_[n], ContactHistory{});
+    }
+    if (hi > lo) std::copy(buf.begin(), buf.end(), new_j_.begin() + new_start_[lo]);
+    for (long i = lo; i < hi; ++i) {
+      std::fill(new_first_.begin() + new_start_[i], new_first_.begin() + new_start_[i + 1],
+                static_cast<Index>(i));
+      if (!have_old) continue;
+      // Linear merge of the old and the new sorted slices carries the history over.
+      const Index* out = new_j_.data() + new_start_[i];
+      const Index k = new_start_[i + 1] - new_start_[i];
+      Index a = start[i], a_end = start[i + 1];
+      for (Index b = 0; b < k && a < a_end; ++b) {
+        while (a < a_end && j[a] < out[b]) ++a;
+        if (a < a_end && j[a] == out[b]) new_history_[new_start_[i] + b] = history[a];
+      }
     }
   }
   start.swap(new_start_);

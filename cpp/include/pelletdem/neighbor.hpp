@@ -37,7 +37,8 @@ class NeighborList {
   static std::vector<std::pair<Index, Index>> brute_force(const Particles& p, double skin);
 
  private:
-  std::vector<Index> cell_start_, cell_items_, counts_;
+  std::vector<Index> cell_start_, cell_items_;
+  std::vector<std::vector<Index>> share_j_;  // per thread: the pairs of its share of particles
   std::vector<Index> new_start_, new_j_, new_first_;
   std::vector<ContactHistory> new_history_;
 };

@@ -15,6 +15,18 @@ struct alignas(32) PosRad {
 };
 static_assert(sizeof(PosRad) == 32, "PosRad is four packed doubles");
 
+// What the contact kernels read of a particle besides (x, r), packed as three runs of four
+// doubles (two cache lines where five arrays took five): velocity and mass, angular velocity
+// and the rolling-friction cap |w| / (dt / I), and the rolling direction w / |w| (eq. 11).
+// compute_forces (or step's drift loop) writes it from the particle arrays before the pairs.
+struct alignas(32) Motion {
+  double vx, vy, vz, m;
+  double wx, wy, wz, roll_cap;
+  double dx, dy, dz, unused;
+  Vec3 roll_dir() const { return Vec3(dx, dy, dz); }
+};
+static_assert(sizeof(Motion) == 96, "Motion is three runs of four doubles");
+
 struct Particles {
   std::vector<Vec3> x;      // position, m
   std::vector<Vec3> v;      // velocity, m/s

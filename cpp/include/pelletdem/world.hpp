@@ -181,18 +181,23 @@ class World {
  private:
   void ensure_forces();
   // compute_forces' work on particle i before the pair loop: zero its force and torque, pack
-  // its position and radius, and its rolling-friction direction and cap (eq. 11). step() does
+  // its position and radius, velocity, mass and rolling-friction direction and cap (eq. 11). step() does
   // it in its drift loop, which reads the same memory, and sets prepared_ so that
   // compute_forces does not do it again.
   PELLETDEM_INLINE void prepare_particle(long i) {
     p_.f[i].setZero();
     p_.t[i].setZero();
-    xr_[i] = PosRad{p_.x[i].x(), p_.x[i].y(), p_.x[i].z(), p_.r[i]};
+    const Vec3 &x = p_.x[i], &v = p_.v[i], &w = p_.w[i];
+    xr_[i] = PosRad{x.x(), x.y(), x.z(), p_.r[i]};
+    double cap = 0.0;
+    Vec3 dir = Vec3::Zero();
     if (params_.contact.rolling > 0.0) {
-      const double wl = p_.w[i].norm();
-      roll_cap_[i] = wl / (params_.dt * p_.inv_i[i]);
-      roll_dir_[i] = wl == 0.0 ? Vec3::Zero() : Vec3(p_.w[i] / wl);
+      const double wl = w.norm();
+      cap = wl / (params_.dt * p_.inv_i[i]);
+      if (wl != 0.0) dir = w / wl;
     }
+    mo_[i] = Motion{v.x(), v.y(), v.z(), p_.m[i], w.x(), w.y(), w.z(), cap,
+                    dir.x(), dir.y(), dir.z(), 0.0};
   }
   void size_particle_scratch();
   void compute_forces(bool advance = true);
@@ -214,11 +219,10 @@ class World {
   std::vector<BrokenBond> broken_;
   std::vector<Vec3> x_build_;
   std::vector<std::vector<Vec3>> buf_f_, buf_t_;
-  // Per particle, this step's rolling-friction direction w/|w| and cap |w| / (dt / I) (eq. 11).
-  std::vector<Vec3> roll_dir_;
-  std::vector<double> roll_cap_;
-  // Positions and radii packed for the pair loop, refreshed by every force pass.
+  // Positions and radii, and velocities, masses and rolling-friction terms (eq. 11), packed
+  // for the contact kernels; refreshed by every force pass (prepare_particle).
   std::vector<PosRad> xr_;
+  std::vector<Motion> mo_;
   std::vector<int> load_walls_;
   std::vector<Sample> samples_;
   std::vector<std::vector<WallSample>> wall_samples_;
