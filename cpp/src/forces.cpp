@@ -816,26 +816,36 @@ void World::wall_forces(bool advance) {
   const double dt_inc = advance ? dt : 0.0;
   const ContactLawParams& cp = law_.params();
   const double adh = cp.wall_adhesion ? adhesion_scale() : 0.0;
-  const int nt = team();
+  const int nw = wall_count();
+  long listed = 0;
   for (Wall& w : walls_) {
     w.force.setZero();
     w.torque.setZero();
     w.radial_force = 0.0;
     w.max_overlap_ratio = 0.0;
-    if (!w.active) continue;
-    const long nc = static_cast<long>(w.contacts.size());
-    // Crushing caps the loading force at p_y,plate pi r^2 (kHuge / r^2 stays finite).
-    const double cap_scale = (w.crushable && cp.plate_yield_stress > 0.0) ? kPi * cp.plate_yield_stress : kHuge;
-    std::vector<Vec3> f_t(nt, Vec3::Zero()), tq_t(nt, Vec3::Zero());
-    std::vector<double> rad_t(nt, 0.0), ov_t(nt, 0.0);
-    std::vector<Index> ovi_t(nt, 0);
-    // Walls see a small share of the particles; a team pays off only for long contact lists.
-#pragma omp parallel num_threads(nc >= static_cast<long>(kParallelMin) ? nt : 1)
-    {
-      const int tid = omp_get_thread_num();
+    if (w.active) listed += static_cast<long>(w.contacts.size());
+  }
+  // One team for all the walls (a fork per wall cost more than a short list saves). Below
+  // kWallParallelMin listed contacts in all, one thread is faster than a team.
+  constexpr long kWallParallelMin = 512;
+  const int nt = listed >= kWallParallelMin ? team() : 1;
+  // Per wall and thread: force, torque, radial force, largest overlap and its particle.
+  std::vector<Vec3> f_t(nw * nt, Vec3::Zero()), tq_t(nw * nt, Vec3::Zero());
+  std::vector<double> rad_t(nw * nt, 0.0), ov_t(nw * nt, 0.0);
+  std::vector<Index> ovi_t(nw * nt, 0);
+#pragma omp parallel num_threads(nt)
+  {
+    const int tid = omp_get_thread_num();
+    for (int wk = 0; wk < nw; ++wk) {
+      Wall& w = walls_[wk];
+      if (!w.active) continue;
+      const long nc = static_cast<long>(w.contacts.size());
+      // Crushing caps the loading force at p_y,plate pi r^2 (kHuge / r^2 stays finite).
+      const double cap_scale = (w.crushable && cp.plate_yield_stress > 0.0) ? kPi * cp.plate_yield_stress : kHuge;
       Vec3 fsum = Vec3::Zero(), tsum = Vec3::Zero();
       double rad = 0.0, ov = 0.0;
       Index ovi = 0;
+      // The barrier at the end of each wall's loop matters: a particle can touch two walls.
 #pragma omp for schedule(static)
       for (long k = 0; k < nc; ++k) {
         WallContact& wc = w.contacts[k];
@@ -866,19 +876,26 @@ void World::wall_forces(bool advance) {
           ovi = i;
         }
       }
-      f_t[tid] = fsum;
-      tq_t[tid] = tsum;
-      rad_t[tid] = rad;
-      ov_t[tid] = ov;
-      ovi_t[tid] = ovi;
+      const int slot = wk * nt + tid;
+      f_t[slot] = fsum;
+      tq_t[slot] = tsum;
+      rad_t[slot] = rad;
+      ov_t[slot] = ov;
+      ovi_t[slot] = ovi;
     }
+  }
+  // Thread sums in a fixed order: the same thread count gives the same bits.
+  for (int wk = 0; wk < nw; ++wk) {
+    Wall& w = walls_[wk];
+    if (!w.active) continue;
     for (int k = 0; k < nt; ++k) {
-      w.force += f_t[k];
-      w.torque += tq_t[k];
-      w.radial_force += rad_t[k];
-      if (ov_t[k] > w.max_overlap_ratio) {
-        w.max_overlap_ratio = ov_t[k];
-        w.max_overlap_particle = ovi_t[k];
+      const int slot = wk * nt + k;
+      w.force += f_t[slot];
+      w.torque += tq_t[slot];
+      w.radial_force += rad_t[slot];
+      if (ov_t[slot] > w.max_overlap_ratio) {
+        w.max_overlap_ratio = ov_t[slot];
+        w.max_overlap_particle = ovi_t[slot];
       }
     }
     max_overlap_seen_ = std::max(max_overlap_seen_, w.max_overlap_ratio);
