@@ -253,7 +253,7 @@ def fill(preset: Preset, seed: int = 0, threads: int = 1, n_particles: Optional[
                check_interval=100)
     world.gravity = (0.0, 0.0, -9.81)
     # The bed has settled: renumber its particles so that neighbours in space are neighbours in
-    # memory for the stages that follow (on a 40,000 bed ~20 % faster on one thread, ~2x on two).
+    # memory for the stages that follow (on a 40,000 bed ~15 % faster on one thread, ~2x on two).
     world.sort_particles()
     s = world.samples()
     xs, rs = np.asarray(world.x), np.asarray(world.r)
