@@ -157,6 +157,13 @@ def test_sorting_particles_is_refused_with_bonds_or_live_views():
     w.create_bonds(pd.BondLaw().to_core())
     with pytest.raises(pd.ParameterError, match="before bonds"):
         w.sort_particles()
+    # A box too large for the neighbour cells is refused before anything moves.
+    huge = pd.World(dt=1e-7, box=((-1e200,) * 3, (1e200,) * 3), gravity=(0, 0, 0))
+    huge.add_particles(np.array([[0, 0, 0], [1e-3, 0, 0], [5e199, 0, 0]]), np.full(3, 2e-4))
+    x0 = huge.positions()
+    with pytest.raises(pd.ParameterError, match="neighbour cells"):
+        huge.sort_particles()
+    assert np.array_equal(huge.positions(), x0)
 
 
 # --- whole pellets: sigma_f at another thread count ----------------------------------------------

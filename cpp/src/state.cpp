@@ -129,16 +129,22 @@ std::vector<Index> World::sort_particles() {
   require(*views_ == 0,
           "cannot sort the particles while numpy views of the particle arrays are alive: delete "
           "them (or copy them) first");
+  // load_state below rebuilds the neighbour list; a box it refuses is refused here, before
+  // anything has moved.
+  if (!list_valid_) rebuild();
   const std::size_t n = p_.size();
   // Morton order of the neighbour cells: particles that touch are near in memory, in cells
   // small enough that a cell's particles share cache lines and large enough to hold a few.
   const double cell = 2.0 * r_max_ + effective_skin();
   std::vector<std::uint64_t> key(n);
+  // Cell coordinates clamped to the key's 21 bits per axis (a huge box must not overflow
+  // the conversion; beyond 2^21 cells the order is merely coarser).
+  auto coord = [&](double v) {
+    return static_cast<std::uint64_t>(std::min(std::max(v / cell, 0.0), 2097151.0));
+  };
   for (std::size_t i = 0; i < n; ++i) {
-    const Vec3 q = (p_.x[i] - params_.box.lo) / cell;
-    key[i] = spread3(static_cast<std::uint64_t>(q.x())) |
-             spread3(static_cast<std::uint64_t>(q.y())) << 1 |
-             spread3(static_cast<std::uint64_t>(q.z())) << 2;
+    const Vec3 d = p_.x[i] - params_.box.lo;
+    key[i] = spread3(coord(d.x())) | spread3(coord(d.y())) << 1 | spread3(coord(d.z())) << 2;
   }
   std::vector<Index> order(n);  // order[new] = old
   for (std::size_t i = 0; i < n; ++i) order[i] = static_cast<Index>(i);
