@@ -81,7 +81,10 @@ def test_energy_conserved_in_a_compressed_packing():
     stops, the law is made conservative and gravity switched off, so the energy that counts is
     contact springs plus motion, with no gravity term to hide a drift behind. The contacts keep
     their residual overlaps: each is now an elastic spring k2 (delta - delta0), and the energy
-    stored in them (most of the total) turns into vibration of the confined packing.
+    stored in them (most of the total at the start) turns into motion of the confined packing,
+    which loosens: the test is that the total holds while most of it changes form. (How much
+    is left in the springs at a given step is chaotic: an earlier bound on it, PE > 0.1 E0
+    after 20,000 steps, held or failed with the rounding of one product.)
     """
     radii = pd.truncated_normal_radii(200, seed=5)
     x, radii = pd.random_pack_cylinder(radii, radius=1.5e-3, z_lo=0.0, z_hi=6e-3, seed=6)
@@ -100,9 +103,10 @@ def test_energy_conserved_in_a_compressed_packing():
     w.gravity = [0.0, 0.0, 0.0]
     w.dt = 1e-6  # the confined packing vibrates stiffly (walls are twice as stiff as pairs)
     w.run(1)  # with mu = 0 the tangential springs left by the first stage are released here
+    assert w.potential_energy() > 0.75 * total_energy(w)  # most of it in the springs (~85 %)
     err, e0 = drift(w, 20_000)
     assert err < 1e-3
-    assert w.potential_energy() > 0.1 * e0  # still a loaded, dense packing
+    assert w.kinetic_energy() > 0.5 * e0  # most of it has turned into motion (~90 %)
 
 
 @pytest.mark.slow

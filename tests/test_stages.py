@@ -117,10 +117,14 @@ def test_density_rises_monotonically_with_pressure(life):
     s = _stage(life, "compact").series
     sz, bd = s["sigma_z"], s["bulk_density"]
     assert spearmanr(sz, bd).correlation > 0.99
-    # Sorted by pressure and smoothed over a few samples, the density never falls.
-    order = np.argsort(sz, kind="stable")
+    # Sorted by pressure and smoothed over a few samples, the density never falls once the
+    # piston carries the bed. Below ~1 % of the final pressure the piston only touches a
+    # rattling bed: its reading jumps between 0 and ~0.4 MPa while the density wanders by a
+    # few kg/m^3, and the order of those samples is a matter of rounding.
+    loaded = sz >= 0.01 * sz.max()
+    order = np.argsort(sz[loaded], kind="stable")
     k = 9
-    smooth = np.convolve(bd[order], np.ones(k) / k, mode="valid")
+    smooth = np.convolve(bd[loaded][order], np.ones(k) / k, mode="valid")
     assert np.all(np.diff(smooth) >= 0.0)
     # Coordination number rises with density too (Fig. 10).
     n = min(len(bd), len(s["coordination_number"]))

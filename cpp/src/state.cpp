@@ -102,6 +102,7 @@ void World::load_state(const WorldState& s) {
     h.delta0 = s.c_delta0[k];
     h.ft = s.c_ft[k];
   }
+  nbr_.mark_live();
   // The saved forces belong to the saved history: recomputing them would advance the history.
   forces_valid_ = s.forces_valid;
 }

@@ -301,6 +301,7 @@ void World::step() {
   double max_disp2 = 0.0;
   long bad = -1;
   const int nt = team();
+  const double inv_dt = 1.0 / dt;
 #pragma omp parallel for schedule(static) num_threads(nt) reduction(max : max_disp2) \
     reduction(max : bad)
   for (long i = 0; i < n; ++i) {
@@ -309,7 +310,7 @@ void World::step() {
     p_.x[i] += dt * p_.v[i];
     if (!p_.x[i].allFinite()) bad = std::max(bad, i);
     max_disp2 = std::max(max_disp2, (p_.x[i] - x_build_[i]).squaredNorm());
-    prepare_particle(i);
+    prepare_particle(i, inv_dt);
   }
   // The forces are zeroed now: should anything below throw, the next step recomputes them.
   forces_valid_ = false;

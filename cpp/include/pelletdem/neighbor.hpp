@@ -2,6 +2,7 @@
 // Verlet neighbour list built from a cell grid: O(N) to build, rebuilt only when some particle
 // has moved more than half the skin. Pairs are stored once (j > i) in CSR form, sorted by j, so
 // that the contact history of the old list can be merged into the new one in linear time.
+#include <cstdint>
 #include <vector>
 
 #include "pelletdem/contact_law.hpp"
@@ -25,8 +26,15 @@ class NeighborList {
   std::vector<Index> j;                  // second particle of each pair (j > i)
   std::vector<Index> first;              // first particle i of each pair, for flat pair loops
   std::vector<ContactHistory> history;   // per pair, survives rebuilds
+  // Per pair: 1 where the history may be non-zero (the pair touched at the last force pass).
+  // The pair loop clears the history of pairs that came apart; with this flag it reads one
+  // byte of a pair that does not touch instead of its 32-byte history, without a branch.
+  std::vector<std::uint8_t> live;
 
   std::size_t pair_count() const { return j.size(); }
+
+  // Sets `live` from the histories: after anything but the pair loop wrote them.
+  void mark_live();
 
   // Rebuild for cutoff r_i + r_j + skin. Throws ParticleEscapedError for a particle outside
   // the box. History of pairs still present is kept; pairs that left the list had no contact.
