@@ -53,9 +53,9 @@ PELLETDEM_INLINE Pair dot3(const Pair& X, const Pair& Y, const Pair& Z, const Ve
   return (X * a.x() + Y * a.y()) + Z * a.z();
 }
 
-// Updates the bond's loads; adds its forces and torques to F and T unless it broke (then
+// Updates the bond's loads; adds its forces and torques to A unless it broke (then
 // returns true and adds nothing).
-PELLETDEM_INLINE bool update_bond(Bond& b, const Particles& p, double dt, Vec3* F, Vec3* T) {
+PELLETDEM_INLINE bool update_bond(Bond& b, const Particles& p, double dt, Load* A) {
   const Index i = b.i, j = b.j;
   const Vec3 d = p.x[j] - p.x[i];
   const double dist = d.norm();
@@ -159,10 +159,10 @@ PELLETDEM_INLINE bool update_bond(Bond& b, const Particles& p, double dt, Vec3* 
   const Vec3 nxft(n.y() * Z[0] - n.z() * Y[0], n.z() * X[0] - n.x() * Z[0],
                   n.x() * Y[0] - n.y() * X[0]);
   const Vec3 f_on_j(FX[0], FY[0], FZ[0]), moment(FX[1], FY[1], FZ[1]);
-  F[j] += f_on_j;
-  F[i] -= f_on_j;
-  T[i] += -ai * nxft - moment;
-  T[j] += -aj * nxft + moment;
+  A[j].f += f_on_j;
+  A[i].f -= f_on_j;
+  A[i].t += -ai * nxft - moment;
+  A[j].t += -aj * nxft + moment;
   return false;
 }
 
@@ -295,11 +295,35 @@ PELLETDEM_INLINE bool lane_all(LaneMask m) {
   const LaneMask h = m & __builtin_shufflevector(m, m, 2, 3, 0, 1);
   return (h & __builtin_shufflevector(h, h, 1, 0, 3, 2))[0] != 0;
 }
+// Adds four pairs' results to the particle loads: force f on j and -f on i, torques ti on i
+// and tj on j, lane by lane in the scalar kernels' order (A[j].f += f; A[i].f -= f;
+// A[i].t += ti; A[j].t += tj), so a particle in two lanes sums in the same order. Each lane's
+// vector is a row (x, y, z, 0) after a transpose and goes in with one load, add and store.
+static_assert(offsetof(Load, f) == 0 && offsetof(Load, t) == 32, "Load is (f, 0, t, 0)");
+PELLETDEM_INLINE void add_loads(Load* A, const Index* gi, const Index* gj, const L3& f, const L3& ti,
+                                const L3& tj) {
+  const L4 rf = transpose(f.x, f.y, f.z, Lane{});
+  const L4 ri = transpose(ti.x, ti.y, ti.z, Lane{});
+  const L4 rj = transpose(tj.x, tj.y, tj.z, Lane{});
+  const Lane row_f[kLanes] = {rf.c0, rf.c1, rf.c2, rf.c3};
+  const Lane row_i[kLanes] = {ri.c0, ri.c1, ri.c2, ri.c3};
+  const Lane row_j[kLanes] = {rj.c0, rj.c1, rj.c2, rj.c3};
+  for (int k = 0; k < kLanes; ++k) {
+    double* fj = A[gj[k]].f.data();
+    double* fi = A[gi[k]].f.data();
+    double* ti_ = A[gi[k]].t.data();
+    double* tj_ = A[gj[k]].t.data();
+    store4(fj, load4(fj) + row_f[k]);
+    store4(fi, load4(fi) - row_f[k]);
+    store4(ti_, load4(ti_) + row_i[k]);
+    store4(tj_, load4(tj_) + row_j[k]);
+  }
+}
 
 // Updates the kLanes intact bonds g[0..] and adds their forces and torques to F and T in bond
 // order. Returns false, having changed nothing, when a bond needs the scalar path.
 PELLETDEM_INLINE bool update_bond_group(Bond* const* g, const PosRad* xr, const Motion* mo,
-                                        double dt, Vec3* F, Vec3* T) {
+                                        double dt, Load* A) {
   Index bi[kLanes], bj[kLanes];
   for (int k = 0; k < kLanes; ++k) {
     bi[k] = g[k]->i;
@@ -398,13 +422,7 @@ PELLETDEM_INLINE bool update_bond_group(Bond* const* g, const PosRad* xr, const 
   store_run(g, kRunNormal, n.x, n.y, n.z, fn);
   store_run(g, kRunShear, ft.x, ft.y, ft.z, mn);
   store_run(g, kRunBend, mt.x, mt.y, mt.z, rad);  // the radius goes back unchanged
-  for (int k = 0; k < kLanes; ++k) {
-    const Vec3 fk(f.x[k], f.y[k], f.z[k]);
-    F[bj[k]] += fk;
-    F[bi[k]] -= fk;
-    T[bi[k]] += Vec3(ti.x[k], ti.y[k], ti.z[k]);
-    T[bj[k]] += Vec3(tj.x[k], tj.y[k], tj.z[k]);
-  }
+  add_loads(A, bi, bj, f, ti, tj);
   return true;
 }
 #endif
@@ -429,11 +447,10 @@ static void static_share(long count, int nt, int tid, long& lo, long& hi) {
 
 namespace {
 
-// One touching pair (i, j) with its history h: the contact force of eq. 5-11 added to F and T.
+// One touching pair (i, j) with its history h: the contact force of eq. 5-11 added to A.
 PELLETDEM_INLINE void contact_one(Index i, Index j, ContactHistory& h, const Particles& p,
                                   const HystereticLaw& law, const ContactLawParams& cp, double dt_inc,
-                                  double adh, const Motion* mo, Vec3* F,
-                                  Vec3* T, PairStats& out) {
+                                  double adh, const Motion* mo, Load* A, PairStats& out) {
   const double ri = p.r[i];
   const Vec3 d = p.x[j] - p.x[i];
   const double rsum = ri + p.r[j];
@@ -447,11 +464,11 @@ PELLETDEM_INLINE void contact_one(Index i, Index j, ContactHistory& h, const Par
                       p.m[i] * p.m[j] / (p.m[i] + p.m[j])};
   const ContactForce cf = law.evaluate(c, h, dt_inc, cp.mu, adh);
   const Vec3 fj = cf.fn * nv + cf.ft;
-  F[j] += fj;
-  F[i] -= fj;
+  A[j].f += fj;
+  A[i].f -= fj;
   const Vec3 nxft = nv.cross(cf.ft);
-  T[i] += -ai * nxft + rolling_torque(cp.rolling, cf.fn, ri, mo[i].roll_dir(), mo[i].roll_cap);
-  T[j] += -aj * nxft + rolling_torque(cp.rolling, cf.fn, p.r[j], mo[j].roll_dir(), mo[j].roll_cap);
+  A[i].t += -ai * nxft + rolling_torque(cp.rolling, cf.fn, ri, mo[i].roll_dir(), mo[i].roll_cap);
+  A[j].t += -aj * nxft + rolling_torque(cp.rolling, cf.fn, p.r[j], mo[j].roll_dir(), mo[j].roll_cap);
   ++out.contacts;
   const double ov = delta / std::min(ri, p.r[j]);
   if (ov > out.max_ov) {
@@ -468,7 +485,7 @@ PELLETDEM_INLINE void contact_one(Index i, Index j, ContactHistory& h, const Par
 PELLETDEM_INLINE void contact_group(const Index* gi, const Index* gj, ContactHistory* const* gh,
                                     const PosRad* xr, const Motion* mo, const HystereticLaw& law,
                                     const ContactLawParams& cp, double dt_inc, double adh,
-                                    Vec3* F, Vec3* T, PairStats& out) {
+                                    Load* A, PairStats& out) {
   static_assert(sizeof(ContactHistory) == 4 * sizeof(double) && offsetof(ContactHistory, ft) == 8,
                 "ContactHistory is (delta0, ft) as four doubles");
   const L4 pi = load_posrad(xr, gi), pj = load_posrad(xr, gj);
@@ -559,14 +576,10 @@ PELLETDEM_INLINE void contact_group(const Index* gi, const Index* gj, ContactHis
   const L3 rti = roll(ri, capi, diri), rtj = roll(rj, capj, dirj);
   ti = {ti.x + rti.x, ti.y + rti.y, ti.z + rti.z};
   tj = {tj.x + rtj.x, tj.y + rtj.y, tj.z + rtj.z};
+  add_loads(A, gi, gj, fj, ti, tj);
   const Lane ov = delta / lane_select(rj < ri, rj, ri);
   for (int k = 0; k < kLanes; ++k) {
     const Index i = gi[k], j = gj[k];
-    const Vec3 f(fj.x[k], fj.y[k], fj.z[k]);
-    F[j] += f;
-    F[i] -= f;
-    T[i] += Vec3(ti.x[k], ti.y[k], ti.z[k]);
-    T[j] += Vec3(tj.x[k], tj.y[k], tj.z[k]);
     ++out.contacts;
     if (ov[k] > out.max_ov) {
       out.max_ov = ov[k];
@@ -579,7 +592,7 @@ PELLETDEM_INLINE void contact_group(const Index* gi, const Index* gj, ContactHis
 }  // namespace
 
 // The pair loop over particles [lo, hi), i.e. over their listed pairs [start[lo], start[hi]):
-// the contact force of every pair that touches (eq. 5-11), added to F and T; the history of
+// the contact force of every pair that touches (eq. 5-11), added to A; the history of
 // pairs that came apart is cleared. The touch test runs four pairs at a time on the packed
 // positions and radii (one aligned load per particle); touching pairs go four at a time through
 // contact_group where the law allows (the rest through contact_one), in pair order either way,
@@ -590,7 +603,7 @@ __attribute__((target_clones("arch=x86-64-v4", "avx2", "default")))
 #endif
 PairStats pair_loop(long lo, long hi, const Particles& p, const PosRad* xr, NeighborList& nbr,
                     const HystereticLaw& law, const ContactLawParams& cp, double dt_inc, double adh,
-                    const Motion* mo, Vec3* F, Vec3* T, bool vector_kernel) {
+                    const Motion* mo, Load* A, bool vector_kernel) {
   PairStats out;
   const Index k0 = nbr.start[lo], k1 = nbr.start[hi];
   const Index* I = nbr.first.data();
@@ -609,7 +622,7 @@ PairStats pair_loop(long lo, long hi, const Particles& p, const PosRad* xr, Neig
     live[k] = on;
   };
   auto one = [&](Index k) {
-    contact_one(I[k], J[k], H[k], p, law, cp, dt_inc, adh, mo, F, T, out);
+    contact_one(I[k], J[k], H[k], p, law, cp, dt_inc, adh, mo, A, out);
   };
 #ifdef PELLETDEM_LANES
   if (vector_kernel && law.plain_pairs()) {
@@ -657,7 +670,7 @@ PairStats pair_loop(long lo, long hi, const Particles& p, const PosRad* xr, Neig
         gj[l] = J[buf[l]];
         gh[l] = H + buf[l];
       }
-      contact_group(gi, gj, gh, xr, mo, law, cp, dt_inc, adh, F, T, out);
+      contact_group(gi, gj, gh, xr, mo, law, cp, dt_inc, adh, A, out);
       for (int l = kLanes; l < nb; ++l) buf[l - kLanes] = buf[l];
       nb -= kLanes;
     }
@@ -684,10 +697,10 @@ PairStats pair_loop(long lo, long hi, const Particles& p, const PosRad* xr, Neig
 __attribute__((target_clones("arch=x86-64-v4", "avx2", "default")))
 #endif
 void bond_loop(std::vector<Bond>& bonds, long lo, long hi, const Particles& p, const PosRad* xr,
-               const Motion* mo, double dt, Vec3* F,
-               Vec3* T, std::vector<long>& broke, bool vector_kernel) {
+               const Motion* mo, double dt, Load* A, std::vector<long>& broke,
+               bool vector_kernel) {
   auto one = [&](long b) {
-    if (update_bond(bonds[b], p, dt, F, T)) broke.push_back(b);
+    if (update_bond(bonds[b], p, dt, A)) broke.push_back(b);
   };
 #ifdef PELLETDEM_LANES
   long idx[kLanes];
@@ -703,7 +716,7 @@ void bond_loop(std::vector<Bond>& bonds, long lo, long hi, const Particles& p, c
     g[m] = &bonds[b];
     if (++m < kLanes) continue;
     m = 0;
-    if (!update_bond_group(g, xr, mo, dt, F, T))
+    if (!update_bond_group(g, xr, mo, dt, A))
       for (int k = 0; k < kLanes; ++k) one(idx[k]);
   }
   for (int k = 0; k < m; ++k) one(idx[k]);
@@ -718,6 +731,8 @@ void World::size_particle_scratch() {
   const std::size_t n = p_.size();
   xr_.resize(n);
   mo_.resize(n);
+  if (loads_.empty()) loads_.resize(1);
+  loads_[0].resize(n);
 }
 
 double World::adhesion_scale() const {
@@ -729,15 +744,9 @@ double World::adhesion_scale() const {
 void World::compute_forces(bool advance) {
   const long n = static_cast<long>(p_.size());
   const int nt = team();
-  if (static_cast<int>(buf_f_.size()) != nt - 1) {
-    buf_f_.assign(nt - 1, {});
-    buf_t_.assign(nt - 1, {});
-  }
-  for (int k = 0; k < nt - 1; ++k) {
-    buf_f_[k].resize(n);
-    buf_t_[k].resize(n);
-  }
   size_particle_scratch();
+  if (static_cast<int>(loads_.size()) < nt) loads_.resize(nt);
+  for (int k = 1; k < nt; ++k) loads_[k].resize(n);
   const double dt = params_.dt;
   // Incremental springs advance by v dt only when the particles moved since the last force
   // evaluation; a recomputation in place (after set_velocities, a new wall, a restored state)
@@ -755,12 +764,8 @@ void World::compute_forces(bool advance) {
 #pragma omp parallel num_threads(nt)
   {
     const int tid = omp_get_thread_num();
-    Vec3* F = tid == 0 ? p_.f.data() : buf_f_[tid - 1].data();
-    Vec3* T = tid == 0 ? p_.t.data() : buf_t_[tid - 1].data();
-    if (tid > 0) {
-      std::fill(buf_f_[tid - 1].begin(), buf_f_[tid - 1].end(), Vec3::Zero());
-      std::fill(buf_t_[tid - 1].begin(), buf_t_[tid - 1].end(), Vec3::Zero());
-    }
+    Load* A = loads_[tid].data();
+    if (tid > 0) std::fill(loads_[tid].begin(), loads_[tid].end(), Load{});
     if (!prepared_) {
 #pragma omp for schedule(static)
       for (long i = 0; i < n; ++i) prepare_particle(i, 1.0 / dt);
@@ -775,12 +780,12 @@ void World::compute_forces(bool advance) {
     };
     long lo = pair_share(tid), hi = pair_share(tid + 1);
     const PairStats ps = pair_loop(lo, hi, p_, xr_.data(), nbr_, law_, cp, dt_inc, adh, mo_.data(),
-                                   F, T, vector_kernels_);
+                                   A, vector_kernels_);
     // A thread's bonds add to its own buffers, so it goes on to them without waiting for the
     // others' pairs; the reduction below waits for all.
     if (nbonds > 0) {
       static_share(nbonds, nt, tid, lo, hi);
-      bond_loop(bonds_, lo, hi, p_, xr_.data(), mo_.data(), dt_inc, F, T, broke_t[tid],
+      bond_loop(bonds_, lo, hi, p_, xr_.data(), mo_.data(), dt_inc, A, broke_t[tid],
                 vector_kernels_);
     }
 #pragma omp barrier
@@ -790,11 +795,13 @@ void World::compute_forces(bool advance) {
     // Reduce the thread buffers in a fixed order: the same thread count gives the same bits.
 #pragma omp for schedule(static)
     for (long i = 0; i < n; ++i) {
-      for (int k = 0; k < nt - 1; ++k) {
-        p_.f[i] += buf_f_[k][i];
-        p_.t[i] += buf_t_[k][i];
+      Vec3 f = loads_[0][i].f, t = loads_[0][i].t;
+      for (int k = 1; k < nt; ++k) {
+        f += loads_[k][i].f;
+        t += loads_[k][i].t;
       }
-      p_.f[i] += p_.m[i] * g;
+      p_.f[i] = f + p_.m[i] * g;
+      p_.t[i] = t;
     }
   }
   n_contacts_ = 0;

@@ -27,6 +27,19 @@ struct alignas(32) Motion {
 };
 static_assert(sizeof(Motion) == 96, "Motion is three runs of four doubles");
 
+// A thread's sum of the contact and bond forces and torques on one particle, in one 64-byte
+// record: the kernels add a pair's four results with one 32-byte load, add and store each
+// (a Vec3 took three of each, after taking the lanes apart one double at a time), and a
+// particle's force and torque share a cache line. compute_forces adds the threads' records
+// into Particles::f and t.
+struct alignas(64) Load {
+  Vec3 f = Vec3::Zero();
+  double unused_f = 0.0;  // stays 0: the kernels add 0 to it
+  Vec3 t = Vec3::Zero();
+  double unused_t = 0.0;
+};
+static_assert(sizeof(Load) == 64, "Load is two runs of four doubles");
+
 struct Particles {
   std::vector<Vec3> x;      // position, m
   std::vector<Vec3> v;      // velocity, m/s

@@ -180,13 +180,12 @@ class World {
 
  private:
   void ensure_forces();
-  // compute_forces' work on particle i before the pair loop: zero its force and torque, pack
+  // compute_forces' work on particle i before the pair loop: zero thread 0's Load, pack
   // its position and radius, velocity, mass and rolling-friction direction and cap (eq. 11). step() does
   // it in its drift loop, which reads the same memory, and sets prepared_ so that
   // compute_forces does not do it again.
   PELLETDEM_INLINE void prepare_particle(long i, double inv_dt) {
-    p_.f[i].setZero();
-    p_.t[i].setZero();
+    loads_[0][i] = Load{};
     const Vec3 &x = p_.x[i], &v = p_.v[i], &w = p_.w[i];
     const double m = p_.m[i], r = p_.r[i];
     double cap = 0.0;
@@ -222,7 +221,7 @@ class World {
   std::vector<Bond> bonds_;
   std::vector<BrokenBond> broken_;
   std::vector<Vec3> x_build_;
-  std::vector<std::vector<Vec3>> buf_f_, buf_t_;
+  std::vector<std::vector<Load>> loads_;  // per thread: its share of the forces (Load)
   // Positions and radii, and velocities, masses and rolling-friction terms (eq. 11), packed
   // for the contact kernels; refreshed by every force pass (prepare_particle).
   std::vector<PosRad> xr_;
