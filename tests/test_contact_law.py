@@ -279,3 +279,36 @@ def test_tangential_damping_of_eq10(e):
     expected = math.exp(-2 * math.pi * zeta / math.sqrt(1 - zeta ** 2))
     np.testing.assert_allclose(ratios, expected, rtol=5e-3)
     np.testing.assert_allclose(np.diff(peaks) * dt, period, rtol=2e-3)
+
+
+
+@pytest.mark.parametrize("vector_kernels", [True, False])
+def test_a_pair_that_came_apart_starts_afresh(vector_kernels):
+    # Eq. 5's residual overlap belongs to one contact: once two spheres have parted, touching
+    # again starts a new contact on the k1 line. Four loaded pairs (the pair loop tests them
+    # four at a time, as in a bed, with vector_kernels; one at a time without) are pulled
+    # apart by less than the skin, so that they stay listed with their history, then put back
+    # at a smaller overlap than their residual one: afresh, f = k1 delta; with the old delta0
+    # it would be the k2 line's k2 (delta - delta0) < 0, i.e. no force (kc = 0).
+    k1, k2 = 1.0e5, 4.0e5
+    w = pd.World(dt=1e-9, box=((-3e-3, -1e-3, -3e-3), (3e-3, 1e-3, 3e-3)),
+                 contact=frictionless(k1, k2), gravity=(0, 0, 0), skin=2e-4)
+    w.vector_kernels = vector_kernels
+    z = np.array([-2e-3, -1e-3, 1e-3, 2e-3])  # 1 mm apart: the pairs never meet each other
+
+    def place(overlap):
+        half = R - 0.5 * overlap
+        return np.concatenate([np.stack([np.full(4, -half), np.zeros(4), z], axis=1),
+                               np.stack([np.full(4, half), np.zeros(4), z], axis=1)])
+
+    w.add_particles(place(4e-6), np.full(8, R))
+    w.run(1)  # loading line: delta_max ~ 4 um, so delta0 ~ 3 um
+    assert w.contacts()["fn"] == pytest.approx(np.full(4, k1 * 4e-6), rel=1e-3)
+    for overlap in (-1e-6, 2e-6):  # parted by 1 um, then back at 2 um < delta0
+        w.set_positions(place(overlap))
+        w.set_velocities(np.zeros((8, 3)), np.zeros((8, 3)))
+        w.run(1)
+    c = w.contacts()
+    assert len(c["fn"]) == 4
+    assert c["fn"] == pytest.approx(k1 * c["overlap"], rel=1e-6)
+    assert c["overlap"] == pytest.approx(np.full(4, 2e-6), rel=1e-3)

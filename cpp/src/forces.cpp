@@ -320,7 +320,7 @@ PELLETDEM_INLINE void add_loads(Load* A, const Index* gi, const Index* gj, const
   }
 }
 
-// Updates the kLanes intact bonds g[0..] and adds their forces and torques to F and T in bond
+// Updates the kLanes intact bonds g[0..] and adds their forces and torques to A in bond
 // order. Returns false, having changed nothing, when a bond needs the scalar path.
 PELLETDEM_INLINE bool update_bond_group(Bond* const* g, const PosRad* xr, const Motion* mo,
                                         double dt, Load* A) {
