@@ -649,9 +649,10 @@ PairStats pair_loop(long lo, long hi, const Particles& p, const PosRad* xr, Neig
           // pair (a branch on each pair's touch was mispredicted often enough to cost ~6 %).
           std::uint32_t was;
           std::memcpy(&was, live + k, sizeof was);
-          if (was & ~on_bytes)
+          const std::uint32_t gone = was & ~on_bytes;  // touched last pass, not now
+          if (gone)
             for (int l = 0; l < kLanes; ++l)
-              if ((was & ~on_bytes) >> (8 * l) & 1u) H[k + l] = ContactHistory{};
+              if (gone >> (8 * l) & 1u) H[k + l] = ContactHistory{};
           std::memcpy(live + k, &on_bytes, sizeof on_bytes);
           k += kLanes;
         } else {
@@ -767,8 +768,9 @@ void World::compute_forces(bool advance) {
     Load* A = loads_[tid].data();
     if (tid > 0) std::fill(loads_[tid].begin(), loads_[tid].end(), Load{});
     if (!prepared_) {
+      const double inv_dt = 1.0 / dt;
 #pragma omp for schedule(static)
-      for (long i = 0; i < n; ++i) prepare_particle(i, 1.0 / dt);
+      for (long i = 0; i < n; ++i) prepare_particle(i, inv_dt);
     }
     // Each thread takes a run of particles holding an equal share of the listed pairs, not of
     // the particles: a compacted pellet is denser under the piston, and equal particle shares
@@ -879,7 +881,7 @@ void World::wall_forces(bool advance) {
         Vec3 n_into;
         const double gap = w.gap(p_.x[i], p_.r[i], n_into);
         if (gap >= 0.0) {
-          if (wc.h.delta0 != 0.0 || wc.h.ft.squaredNorm() != 0.0) wc.h = ContactHistory{};
+          if (!wc.h.blank()) wc.h = ContactHistory{};
           continue;
         }
         const double delta = -gap;

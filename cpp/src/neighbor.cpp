@@ -137,7 +137,7 @@ void NeighborList::build(const Particles& p, const Box& box, double skin, double
 void NeighborList::mark_live() {
   live.resize(history.size());
   for (std::size_t k = 0; k < history.size(); ++k)
-    live[k] = history[k].delta0 != 0.0 || history[k].ft.squaredNorm() != 0.0;
+    live[k] = !history[k].blank();
 }
 
 std::vector<std::pair<Index, Index>> NeighborList::brute_force(const Particles& p, double skin) {

@@ -23,7 +23,7 @@ WorldState World::save_state() const {
   for (std::size_t i = 0; i + 1 < nbr_.start.size(); ++i)
     for (Index k = nbr_.start[i]; k < nbr_.start[i + 1]; ++k) {
       const ContactHistory& h = nbr_.history[k];
-      if (h.delta0 == 0.0 && h.ft.squaredNorm() == 0.0) continue;
+      if (h.blank()) continue;
       s.ci.push_back(static_cast<Index>(i));
       s.cj.push_back(nbr_.j[k]);
       s.c_delta0.push_back(h.delta0);
@@ -65,7 +65,7 @@ void World::load_state(const WorldState& s) {
   r_max_ = 0.0;
   for (std::size_t k = 0; k < n; ++k) {
     p.inv_m[k] = 1.0 / p.m[k];
-    p.inv_i[k] = 1.0 / (0.4 * p.m[k] * p.r[k] * p.r[k]);
+    p.inv_i[k] = 1.0 / sphere_inertia(p.m[k], p.r[k]);
     r_max_ = std::max(r_max_, p.r[k]);
   }
   p_ = std::move(p);

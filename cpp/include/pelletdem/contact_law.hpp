@@ -14,6 +14,7 @@ namespace pelletdem {
 struct ContactHistory {
   double delta0 = 0.0;        // residual (plastic) overlap delta_{n,0} of eq. 5, m
   Vec3 ft = Vec3::Zero();     // stored tangential spring force on the second body, N (eq. 9)
+  bool blank() const { return delta0 == 0.0 && ft.squaredNorm() == 0.0; }
 };
 
 struct ContactLawParams {

@@ -40,6 +40,9 @@ struct alignas(64) Load {
 };
 static_assert(sizeof(Load) == 64, "Load is two runs of four doubles");
 
+// Moment of inertia of a solid sphere of mass m (kg) and radius r (m), kg m^2.
+inline double sphere_inertia(double m, double r) { return 0.4 * m * r * r; }
+
 struct Particles {
   std::vector<Vec3> x;      // position, m
   std::vector<Vec3> v;      // velocity, m/s
@@ -62,7 +65,7 @@ struct Particles {
     r.push_back(ri);
     m.push_back(mi);
     inv_m.push_back(1.0 / mi);
-    inv_i.push_back(1.0 / (0.4 * mi * ri * ri));
+    inv_i.push_back(1.0 / sphere_inertia(mi, ri));
   }
 
   double moment_of_inertia(std::size_t i) const { return 1.0 / inv_i[i]; }

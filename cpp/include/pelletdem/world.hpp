@@ -194,7 +194,7 @@ class World {
       // One square root and one division per particle: this loop ran latency-bound on a
       // chain of a root and four divisions (9 % of a step on the settled 10,000 bed).
       const double wl = w.norm();
-      cap = wl * (0.4 * m * r * r) * inv_dt;  // |w| I / dt
+      cap = wl * sphere_inertia(m, r) * inv_dt;  // |w| I / dt
       const double inv = wl != 0.0 ? 1.0 / wl : 0.0;
       dir = w * inv;
     }
