@@ -281,7 +281,6 @@ def test_tangential_damping_of_eq10(e):
     np.testing.assert_allclose(np.diff(peaks) * dt, period, rtol=2e-3)
 
 
-
 @pytest.mark.parametrize("vector_kernels", [True, False])
 def test_a_pair_that_came_apart_starts_afresh(vector_kernels):
     # Eq. 5's residual overlap belongs to one contact: once two spheres have parted, touching
