@@ -7,19 +7,20 @@
 #include <cstring>
 #include <omp.h>
 
+#include "pelletdem/integrate.hpp"
 #include "pelletdem/world.hpp"
 
 namespace pelletdem {
 
 namespace {
 
-// Rolling friction of eq. 11 on one body: -m_r f_n r w/|w|, capped so that one step's torque
-// cannot reverse the spin (otherwise a resting sphere chatters about w = 0). The direction
-// w/|w| and the cap |w| / (dt / I) are the body's: compute_forces works them out once per
-// particle and step rather than once per contact.
-PELLETDEM_INLINE Vec3 rolling_torque(double m_r, double fn, double r, const Vec3& dir, double cap) {
-  if (m_r <= 0.0 || fn <= 0.0 || cap == 0.0) return Vec3::Zero();
-  return -std::min(m_r * fn * r, cap) * dir;
+// Magnitude of one contact's rolling-friction moment on one body, eq. 11: m_r f_n r, capped so
+// that one step's torque cannot reverse the spin (otherwise a resting sphere chatters about
+// w = 0). The cap |w| I / dt is the body's, worked out once per particle and step; the moment
+// acts along -w/|w| (Load::roll).
+PELLETDEM_INLINE double rolling_moment(double m_r, double fn, double r, double cap) {
+  if (m_r <= 0.0 || fn <= 0.0 || cap == 0.0) return 0.0;
+  return std::min(m_r * fn * r, cap);
 }
 
 // Sine and cosine of a step's twist angle: a short series for the tiny angles of a time step
@@ -270,8 +271,7 @@ PELLETDEM_INLINE L4 load_posrad(const PosRad* xr, const Index* idx) {
   return transpose(row(0), row(1), row(2), row(3));
 }
 // Run `offset` (a byte offset of a run of four doubles in Motion) of mo[idx[0..3]] as columns.
-constexpr std::size_t kRunVel = offsetof(Motion, vx), kRunSpin = offsetof(Motion, wx),
-                      kRunRoll = offsetof(Motion, dx);
+constexpr std::size_t kRunVel = offsetof(Motion, vx), kRunSpin = offsetof(Motion, wx);
 PELLETDEM_INLINE L4 load_motion(const Motion* mo, const Index* idx, std::size_t offset) {
   auto row = [&](int k) {
     return *reinterpret_cast<const Lane*>(reinterpret_cast<const char*>(mo + idx[k]) + offset);
@@ -296,15 +296,17 @@ PELLETDEM_INLINE bool lane_all(LaneMask m) {
   return (h & __builtin_shufflevector(h, h, 1, 0, 3, 2))[0] != 0;
 }
 // Adds four pairs' results to the particle loads: force f on j and -f on i, torques ti on i
-// and tj on j, lane by lane in the scalar kernels' order (A[j].f += f; A[i].f -= f;
-// A[i].t += ti; A[j].t += tj), so a particle in two lanes sums in the same order. Each lane's
-// vector is a row (x, y, z, 0) after a transpose and goes in with one load, add and store.
-static_assert(offsetof(Load, f) == 0 && offsetof(Load, t) == 32, "Load is (f, 0, t, 0)");
+// and tj on j with rolling moments rolli and rollj (Load::roll), lane by lane in the scalar
+// kernels' order (A[j].f += f; A[i].f -= f; A[i].t += ti; A[j].t += tj), so a particle in two
+// lanes sums in the same order. Each lane's vector is a row (x, y, z, 0) or (x, y, z, roll)
+// after a transpose and goes in with one load, add and store.
+static_assert(offsetof(Load, f) == 0 && offsetof(Load, t) == 32 && offsetof(Load, roll) == 56,
+              "Load is (f, 0, t, roll)");
 PELLETDEM_INLINE void add_loads(Load* A, const Index* gi, const Index* gj, const L3& f, const L3& ti,
-                                const L3& tj) {
+                                const L3& tj, Lane rolli = Lane{}, Lane rollj = Lane{}) {
   const L4 rf = transpose(f.x, f.y, f.z, Lane{});
-  const L4 ri = transpose(ti.x, ti.y, ti.z, Lane{});
-  const L4 rj = transpose(tj.x, tj.y, tj.z, Lane{});
+  const L4 ri = transpose(ti.x, ti.y, ti.z, rolli);
+  const L4 rj = transpose(tj.x, tj.y, tj.z, rollj);
   const Lane row_f[kLanes] = {rf.c0, rf.c1, rf.c2, rf.c3};
   const Lane row_i[kLanes] = {ri.c0, ri.c1, ri.c2, ri.c3};
   const Lane row_j[kLanes] = {rj.c0, rj.c1, rj.c2, rj.c3};
@@ -436,15 +438,6 @@ struct PairStats {
   Index max_ov_i = 0;   // the smaller particle of that pair
 };
 
-// The contiguous share of `count` items that thread `tid` of `nt` gets from `omp for
-// schedule(static)`: the first count % nt threads one more. The pair and bond loops split their
-// work this way by hand so that they can be functions of their own (below).
-static void static_share(long count, int nt, int tid, long& lo, long& hi) {
-  const long q = count / nt, extra = count % nt;
-  lo = q * tid + std::min<long>(tid, extra);
-  hi = lo + q + (tid < extra ? 1 : 0);
-}
-
 namespace {
 
 // One touching pair (i, j) with its history h: the contact force of eq. 5-11 added to A.
@@ -456,7 +449,7 @@ PELLETDEM_INLINE void contact_one(Index i, Index j, ContactHistory& h, const Par
   const double rsum = ri + p.r[j];
   const double dist = std::sqrt(d.squaredNorm());
   const double delta = rsum - dist;
-  const Vec3 nv = d / dist;
+  const Vec3 nv = d * (1.0 / dist);
   const double ai = ri - 0.5 * delta, aj = p.r[j] - 0.5 * delta;
   const Vec3 v_rel = p.v[j] - p.v[i] - (ai * p.w[i] + aj * p.w[j]).cross(nv);
   const double vn = v_rel.dot(nv);
@@ -467,8 +460,10 @@ PELLETDEM_INLINE void contact_one(Index i, Index j, ContactHistory& h, const Par
   A[j].f += fj;
   A[i].f -= fj;
   const Vec3 nxft = nv.cross(cf.ft);
-  A[i].t += -ai * nxft + rolling_torque(cp.rolling, cf.fn, ri, mo[i].roll_dir(), mo[i].roll_cap);
-  A[j].t += -aj * nxft + rolling_torque(cp.rolling, cf.fn, p.r[j], mo[j].roll_dir(), mo[j].roll_cap);
+  A[i].t += -ai * nxft;
+  A[i].roll += rolling_moment(cp.rolling, cf.fn, ri, mo[i].roll_cap);
+  A[j].t += -aj * nxft;
+  A[j].roll += rolling_moment(cp.rolling, cf.fn, p.r[j], mo[j].roll_cap);
   ++out.contacts;
   const double ov = delta / std::min(ri, p.r[j]);
   if (ov > out.max_ov) {
@@ -496,7 +491,8 @@ PELLETDEM_INLINE void contact_group(const Index* gi, const Index* gj, ContactHis
   Lane dist;
   for (int k = 0; k < kLanes; ++k) dist[k] = std::sqrt(dist2[k]);
   const Lane delta = rsum - dist;
-  const L3 nv{d.x / dist, d.y / dist, d.z / dist};
+  const Lane inv_dist = 1.0 / dist;
+  const L3 nv{d.x * inv_dist, d.y * inv_dist, d.z * inv_dist};
   const Lane ai = ri - 0.5 * delta, aj = rj - 0.5 * delta;
   const L4 spin_i = load_motion(mo, gi, kRunSpin), spin_j = load_motion(mo, gj, kRunSpin);
   const L3 wi{spin_i.c0, spin_i.c1, spin_i.c2}, wj{spin_j.c0, spin_j.c1, spin_j.c2};
@@ -523,20 +519,19 @@ PELLETDEM_INLINE void contact_group(const Index* gi, const Index* gj, ContactHis
   const LaneMask loading = f_elastic >= f_load;
   const LaneMask sticking = ~loading & (f_elastic <= -kc * delta);
   const Lane fn = lane_select(loading, f_load, lane_select(sticking, -kc * delta, f_elastic));
-  delta0 = lane_select(loading, delta - f_load / k2,
+  delta0 = lane_select(loading, delta - f_load * (1.0 / k2),
                        lane_select(sticking, delta * (1.0 + kc / k2), delta0));
 
   // Eq. 9-10 (HystereticLaw::evaluate).
   const double kt = s * lp.kt_ratio * lp.k1;
-  Lane old_len, new_len;
   const Lane old2 = lane_dot(hft, hft);
-  for (int k = 0; k < kLanes; ++k) old_len[k] = std::sqrt(old2[k]);
   const Lane along = lane_dot(hft, nv);
   hft = {hft.x - along * nv.x, hft.y - along * nv.y, hft.z - along * nv.z};
   const Lane new2 = lane_dot(hft, hft);
-  for (int k = 0; k < kLanes; ++k) new_len[k] = std::sqrt(new2[k]);
-  const LaneMask keep = new_len > 0.0;
-  const Lane q = old_len / lane_select(keep, new_len, Lane{} + 1.0);
+  const LaneMask keep = new2 > 0.0;
+  const Lane ratio = old2 / lane_select(keep, new2, Lane{} + 1.0);
+  Lane q;
+  for (int k = 0; k < kLanes; ++k) q[k] = std::sqrt(ratio[k]);
   hft = lane_select(keep, L3{hft.x * q, hft.y * q, hft.z * q}, hft);
   const double ktdt = kt * dt_inc;
   hft = {hft.x - ktdt * vt.x, hft.y - ktdt * vt.y, hft.z - ktdt * vt.z};
@@ -547,11 +542,11 @@ PELLETDEM_INLINE void contact_group(const Index* gi, const Index* gj, ContactHis
   L3 ft{hft.x - gamma_t * vt.x, hft.y - gamma_t * vt.y, hft.z - gamma_t * vt.z};
   const Lane limit = cp.mu * lane_select(fn < 0.0, Lane{}, fn);  // mu std::max(fn, 0)
   const Lane ft2 = lane_dot(ft, ft);
-  Lane ft_len;
-  for (int k = 0; k < kLanes; ++k) ft_len[k] = std::sqrt(ft2[k]);
-  const LaneMask slide = ft_len > limit;
+  const LaneMask slide = ft2 > limit * limit;
   if (lane_any(slide)) {
-    const LaneMask some = ft_len > 0.0;
+    Lane ft_len;
+    for (int k = 0; k < kLanes; ++k) ft_len[k] = std::sqrt(ft2[k]);
+    const LaneMask some = ft2 > 0.0;
     const Lane r = limit / lane_select(some, ft_len, Lane{} + 1.0);
     const L3 capped = lane_select(some, L3{ft.x * r, ft.y * r, ft.z * r}, L3{Lane{}, Lane{}, Lane{}});
     ft = lane_select(slide, capped, ft);
@@ -562,29 +557,25 @@ PELLETDEM_INLINE void contact_group(const Index* gi, const Index* gj, ContactHis
   const L3 fj{fn * nv.x + ft.x, fn * nv.y + ft.y, fn * nv.z + ft.z};
   const L3 nxft = lane_cross(nv, ft);
   const Lane mai = -ai, maj = -aj;
-  L3 ti{mai * nxft.x, mai * nxft.y, mai * nxft.z}, tj{maj * nxft.x, maj * nxft.y, maj * nxft.z};
-  // Eq. 11 on each body (rolling_torque): zero, then added, where it does not apply.
-  const L4 roll_i = load_motion(mo, gi, kRunRoll), roll_j = load_motion(mo, gj, kRunRoll);
-  const Lane capi = spin_i.c3, capj = spin_j.c3;
-  const L3 diri{roll_i.c0, roll_i.c1, roll_i.c2}, dirj{roll_j.c0, roll_j.c1, roll_j.c2};
-  auto roll = [&](Lane r, Lane cap, const L3& dir) {
+  const L3 ti{mai * nxft.x, mai * nxft.y, mai * nxft.z}, tj{maj * nxft.x, maj * nxft.y, maj * nxft.z};
+  // Eq. 11 on each body (rolling_moment): zero where it does not apply.
+  auto roll = [&](Lane r, Lane cap) {
     const LaneMask on = (cp.rolling > 0.0 ? ~LaneMask{} : LaneMask{}) & (fn > 0.0) & (cap != 0.0);
     const Lane mfr = cp.rolling * fn * r;
-    const Lane m = -lane_select(cap < mfr, cap, mfr);
-    return lane_select(on, L3{m * dir.x, m * dir.y, m * dir.z}, L3{Lane{}, Lane{}, Lane{}});
+    return lane_select(on, lane_select(cap < mfr, cap, mfr), Lane{});
   };
-  const L3 rti = roll(ri, capi, diri), rtj = roll(rj, capj, dirj);
-  ti = {ti.x + rti.x, ti.y + rti.y, ti.z + rti.z};
-  tj = {tj.x + rtj.x, tj.y + rtj.y, tj.z + rtj.z};
-  add_loads(A, gi, gj, fj, ti, tj);
-  const Lane ov = delta / lane_select(rj < ri, rj, ri);
-  for (int k = 0; k < kLanes; ++k) {
-    const Index i = gi[k], j = gj[k];
-    ++out.contacts;
-    if (ov[k] > out.max_ov) {
-      out.max_ov = ov[k];
-      out.max_ov_i = ri[k] <= rj[k] ? i : j;
-    }
+  add_loads(A, gi, gj, fj, ti, tj, roll(ri, spin_i.c3), roll(rj, spin_j.c3));
+  out.contacts += kLanes;
+  // The largest delta / min(r_i, r_j): the division only for a group that may hold a new
+  // one (the bound is below max_ov by far more than the rounding, so none is missed).
+  const Lane r_min = lane_select(rj < ri, rj, ri);
+  if (lane_any(delta > (out.max_ov * (1.0 - 1e-12)) * r_min)) {
+    const Lane ov = delta / r_min;
+    for (int k = 0; k < kLanes; ++k)
+      if (ov[k] > out.max_ov) {
+        out.max_ov = ov[k];
+        out.max_ov_i = ri[k] <= rj[k] ? gi[k] : gj[k];
+      }
   }
 }
 #endif
@@ -732,6 +723,7 @@ void World::size_particle_scratch() {
   const std::size_t n = p_.size();
   xr_.resize(n);
   mo_.resize(n);
+  spin_inv_.resize(n);
   if (loads_.empty()) loads_.resize(1);
   loads_[0].resize(n);
 }
@@ -742,7 +734,7 @@ double World::adhesion_scale() const {
   return std::max(0.0, 1.0 - (time_ - ramp_start_) / ramp_duration_);
 }
 
-void World::compute_forces(bool advance) {
+void World::compute_forces(bool advance, Finish finish) {
   const long n = static_cast<long>(p_.size());
   const int nt = team();
   size_particle_scratch();
@@ -755,12 +747,13 @@ void World::compute_forces(bool advance) {
   const double dt_inc = advance ? dt : 0.0;
   const double adh = adhesion_scale();
   const ContactLawParams& cp = law_.params();
-  const Vec3 g = params_.gravity / params_.density_scale;
   const long nbonds = static_cast<long>(bonds_.size());
   std::vector<long> contacts_t(nt, 0);
   std::vector<double> maxov_t(nt, 0.0);
   std::vector<Index> maxov_i_t(nt, 0);
   std::vector<std::vector<long>> broke_t(nt);
+  const int nt_walls = start_walls(nt);
+  const LoadSums sums = load_sums(nt);
 
 #pragma omp parallel num_threads(nt)
   {
@@ -768,9 +761,11 @@ void World::compute_forces(bool advance) {
     Load* A = loads_[tid].data();
     if (tid > 0) std::fill(loads_[tid].begin(), loads_[tid].end(), Load{});
     if (!prepared_) {
-      const double inv_dt = 1.0 / dt;
-#pragma omp for schedule(static)
-      for (long i = 0; i < n; ++i) prepare_particle(i, inv_dt);
+      long lo, hi;
+      static_share(n, nt, tid, lo, hi);
+      pack_particles(lo, hi, p_, 1.0 / dt, cp.rolling > 0.0, loads_[0].data(), xr_.data(), mo_.data(),
+                     spin_inv_.data());
+#pragma omp barrier
     }
     // Each thread takes a run of particles holding an equal share of the listed pairs, not of
     // the particles: a compacted pellet is denser under the piston, and equal particle shares
@@ -790,22 +785,23 @@ void World::compute_forces(bool advance) {
       bond_loop(bonds_, lo, hi, p_, xr_.data(), mo_.data(), dt_inc, A, broke_t[tid],
                 vector_kernels_);
     }
+    // The walls' share of this thread goes into its own buffer as well.
+    if (tid < nt_walls) wall_share(tid, nt_walls, dt_inc, A);
 #pragma omp barrier
     contacts_t[tid] = ps.contacts;
     maxov_t[tid] = ps.max_ov;
     maxov_i_t[tid] = ps.max_ov_i;
     // Reduce the thread buffers in a fixed order: the same thread count gives the same bits.
-#pragma omp for schedule(static)
-    for (long i = 0; i < n; ++i) {
-      Vec3 f = loads_[0][i].f, t = loads_[0][i].t;
-      for (int k = 1; k < nt; ++k) {
-        f += loads_[k][i].f;
-        t += loads_[k][i].t;
-      }
-      p_.f[i] = f + p_.m[i] * g;
-      p_.t[i] = t;
+    // With step()'s closing half kick, here while the forces are in registers (a pass of its
+    // own read and wrote the velocities again: 4 % of a step), or left to the next drift pass.
+    if (finish != Finish::Defer) {
+      static_share(n, nt, tid, lo, hi);
+      reduce_loads(lo, hi, sums, finish == Finish::ReduceKick ? 0.5 * dt : 0.0, p_);
     }
   }
+  kick_pending_ = finish == Finish::Defer;
+  kick_nt_ = nt;
+  finish_walls(nt_walls);
   n_contacts_ = 0;
   max_overlap_ = 0.0;
   for (int k = 0; k < nt; ++k) {
@@ -834,17 +830,29 @@ void World::compute_forces(bool advance) {
     bond.mn = 0.0;
     bond.mt.setZero();
   }
-  wall_forces(advance);
   max_overlap_seen_ = std::max(max_overlap_seen_, max_overlap_);
   prepared_ = false;
 }
 
-void World::wall_forces(bool advance) {
-  const double dt = params_.dt;
-  const double dt_inc = advance ? dt : 0.0;
-  const ContactLawParams& cp = law_.params();
-  const double adh = cp.wall_adhesion ? adhesion_scale() : 0.0;
-  const int nw = wall_count();
+LoadSums World::load_sums(int nt) const {
+  return LoadSums{loads_.data(), nt, params_.gravity / params_.density_scale, spin_inv_.data()};
+}
+
+void World::finish_pending_kick() {
+  if (!kick_pending_) return;
+  const long n = static_cast<long>(p_.size());
+  const LoadSums sums = load_sums(kick_nt_);
+  const double half_dt = 0.5 * params_.dt;
+#pragma omp parallel num_threads(kick_nt_)
+  {
+    long lo, hi;
+    static_share(n, kick_nt_, omp_get_thread_num(), lo, hi);
+    reduce_loads(lo, hi, sums, half_dt, p_);
+  }
+  kick_pending_ = false;
+}
+
+int World::start_walls(int nt) {
   long listed = 0;
   for (Wall& w : walls_) {
     w.force.setZero();
@@ -853,77 +861,71 @@ void World::wall_forces(bool advance) {
     w.max_overlap_ratio = 0.0;
     if (w.active) listed += static_cast<long>(w.contacts.size());
   }
-  // One team for all the walls (a fork per wall cost more than a short list saves). Below
-  // kWallParallelMin listed contacts in all, one thread is faster than a team.
+  // Below kWallParallelMin listed contacts in all, one thread is faster than a team.
   constexpr long kWallParallelMin = 512;
-  const int nt = listed >= kWallParallelMin ? team() : 1;
-  // Per wall and thread: force, torque, radial force, largest overlap and its particle.
-  std::vector<Vec3> f_t(nw * nt, Vec3::Zero()), tq_t(nw * nt, Vec3::Zero());
-  std::vector<double> rad_t(nw * nt, 0.0), ov_t(nw * nt, 0.0);
-  std::vector<Index> ovi_t(nw * nt, 0);
-#pragma omp parallel num_threads(nt)
-  {
-    const int tid = omp_get_thread_num();
-    for (int wk = 0; wk < nw; ++wk) {
-      Wall& w = walls_[wk];
-      if (!w.active) continue;
-      const long nc = static_cast<long>(w.contacts.size());
-      // Crushing caps the loading force at p_y,plate pi r^2 (kHuge / r^2 stays finite).
-      const double cap_scale = (w.crushable && cp.plate_yield_stress > 0.0) ? kPi * cp.plate_yield_stress : kHuge;
-      Vec3 fsum = Vec3::Zero(), tsum = Vec3::Zero();
-      double rad = 0.0, ov = 0.0;
-      Index ovi = 0;
-      // The barrier at the end of each wall's loop matters: a particle can touch two walls.
-#pragma omp for schedule(static)
-      for (long k = 0; k < nc; ++k) {
-        WallContact& wc = w.contacts[k];
-        const Index i = wc.i;
-        Vec3 n_into;
-        const double gap = w.gap(p_.x[i], p_.r[i], n_into);
-        if (gap >= 0.0) {
-          if (!wc.h.blank()) wc.h = ContactHistory{};
-          continue;
-        }
-        const double delta = -gap;
-        const double a = p_.r[i] - delta;  // lever arm to the contact point on the wall
-        const Vec3 v_rel = p_.v[i] - a * p_.w[i].cross(n_into) - w.surface_velocity(n_into);
-        const double vn = v_rel.dot(n_into);
-        ContactKinematics c{delta, vn, v_rel - vn * n_into, n_into, p_.r[i], p_.m[i], true, cap_scale * p_.r[i] * p_.r[i]};
-        const ContactForce cf = law_.evaluate(c, wc.h, dt_inc, cp.mu_wall, adh);
-        const Vec3 fp = cf.fn * n_into + cf.ft;
-        p_.f[i] += fp;
-        p_.t[i] += -a * n_into.cross(cf.ft) +
-                   rolling_torque(cp.rolling, cf.fn, p_.r[i], mo_[i].roll_dir(), mo_[i].roll_cap);
-        const Vec3 contact_point = p_.x[i] - a * n_into;
-        fsum -= fp;
-        tsum += (contact_point - w.point).cross(-fp);
-        rad += cf.fn;
-        const double ratio = delta / p_.r[i];
-        if (ratio > ov) {
-          ov = ratio;
-          ovi = i;
-        }
-      }
-      const int slot = wk * nt + tid;
-      f_t[slot] = fsum;
-      tq_t[slot] = tsum;
-      rad_t[slot] = rad;
-      ov_t[slot] = ov;
-      ovi_t[slot] = ovi;
-    }
-  }
-  // Thread sums in a fixed order: the same thread count gives the same bits.
+  const int nt_walls = listed >= kWallParallelMin ? nt : 1;
+  const std::size_t slots = walls_.size() * static_cast<std::size_t>(nt_walls);
+  wall_part_.assign(slots, WallPart{});
+  return nt_walls;
+}
+
+void World::wall_share(int tid, int nt_walls, double dt_inc, Load* A) {
+  const ContactLawParams& cp = law_.params();
+  const double adh = cp.wall_adhesion ? adhesion_scale() : 0.0;
+  const int nw = wall_count();
   for (int wk = 0; wk < nw; ++wk) {
     Wall& w = walls_[wk];
     if (!w.active) continue;
-    for (int k = 0; k < nt; ++k) {
-      const int slot = wk * nt + k;
-      w.force += f_t[slot];
-      w.torque += tq_t[slot];
-      w.radial_force += rad_t[slot];
-      if (ov_t[slot] > w.max_overlap_ratio) {
-        w.max_overlap_ratio = ov_t[slot];
-        w.max_overlap_particle = ovi_t[slot];
+    long lo, hi;
+    static_share(static_cast<long>(w.contacts.size()), nt_walls, tid, lo, hi);
+    // Crushing caps the loading force at p_y,plate pi r^2 (kHuge / r^2 stays finite).
+    const double cap_scale = (w.crushable && cp.plate_yield_stress > 0.0) ? kPi * cp.plate_yield_stress : kHuge;
+    WallPart& part = wall_part_[static_cast<std::size_t>(wk) * nt_walls + tid];
+    for (long k = lo; k < hi; ++k) {
+      WallContact& wc = w.contacts[k];
+      const Index i = wc.i;
+      Vec3 n_into;
+      const double gap = w.gap(p_.x[i], p_.r[i], n_into);
+      if (gap >= 0.0) {
+        if (!wc.h.blank()) wc.h = ContactHistory{};
+        continue;
+      }
+      const double delta = -gap;
+      const double a = p_.r[i] - delta;  // lever arm to the contact point on the wall
+      const Vec3 v_rel = p_.v[i] - a * p_.w[i].cross(n_into) - w.surface_velocity(n_into);
+      const double vn = v_rel.dot(n_into);
+      ContactKinematics c{delta, vn, v_rel - vn * n_into, n_into, p_.r[i], p_.m[i], true, cap_scale * p_.r[i] * p_.r[i]};
+      const ContactForce cf = law_.evaluate(c, wc.h, dt_inc, cp.mu_wall, adh);
+      const Vec3 fp = cf.fn * n_into + cf.ft;
+      A[i].f += fp;
+      A[i].t += -a * n_into.cross(cf.ft);
+      A[i].roll += rolling_moment(cp.rolling, cf.fn, p_.r[i], mo_[i].roll_cap);
+      const Vec3 contact_point = p_.x[i] - a * n_into;
+      part.force -= fp;
+      part.torque += (contact_point - w.point).cross(-fp);
+      part.radial += cf.fn;
+      const double ratio = delta / p_.r[i];
+      if (ratio > part.max_ov) {
+        part.max_ov = ratio;
+        part.max_ov_i = i;
+      }
+    }
+  }
+}
+
+void World::finish_walls(int nt_walls) {
+  // Thread sums in a fixed order: the same thread count gives the same bits.
+  for (int wk = 0; wk < wall_count(); ++wk) {
+    Wall& w = walls_[wk];
+    if (!w.active) continue;
+    for (int k = 0; k < nt_walls; ++k) {
+      const WallPart& part = wall_part_[static_cast<std::size_t>(wk) * nt_walls + k];
+      w.force += part.force;
+      w.torque += part.torque;
+      w.radial_force += part.radial;
+      if (part.max_ov > w.max_overlap_ratio) {
+        w.max_overlap_ratio = part.max_ov;
+        w.max_overlap_particle = part.max_ov_i;
       }
     }
     max_overlap_seen_ = std::max(max_overlap_seen_, w.max_overlap_ratio);

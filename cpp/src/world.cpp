@@ -5,6 +5,7 @@
 #include <omp.h>
 
 #include "pelletdem/errors.hpp"
+#include "pelletdem/integrate.hpp"
 
 namespace pelletdem {
 
@@ -293,24 +294,32 @@ void World::check_guards() {
                            "target stress, or time step too large"));
 }
 
-void World::step() {
+void World::step() { advance(false); }
+
+void World::advance(bool defer) {
   const long n = static_cast<long>(p_.size());
   const double dt = params_.dt;
   ensure_forces();
   size_particle_scratch();
+  const int nt = team();
+  const bool rolling = params_.contact.rolling > 0.0;
+  std::vector<DriftResult> drift_t(nt);
+  const LoadSums sums = load_sums(kick_nt_);
+  const LoadSums* pending = kick_pending_ ? &sums : nullptr;
+#pragma omp parallel num_threads(nt)
+  {
+    const int tid = omp_get_thread_num();
+    long lo, hi;
+    static_share(n, nt, tid, lo, hi);
+    drift_t[tid] = kick_drift_pack(lo, hi, dt, rolling, p_, x_build_.data(), loads_[0].data(),
+                                   xr_.data(), mo_.data(), spin_inv_.data(), pending);
+  }
+  kick_pending_ = false;
   double max_disp2 = 0.0;
   long bad = -1;
-  const int nt = team();
-  const double inv_dt = 1.0 / dt;
-#pragma omp parallel for schedule(static) num_threads(nt) reduction(max : max_disp2) \
-    reduction(max : bad)
-  for (long i = 0; i < n; ++i) {
-    p_.v[i] += (0.5 * dt * p_.inv_m[i]) * p_.f[i];
-    p_.w[i] += (0.5 * dt * p_.inv_i[i]) * p_.t[i];
-    p_.x[i] += dt * p_.v[i];
-    if (!p_.x[i].allFinite()) bad = std::max(bad, i);
-    max_disp2 = std::max(max_disp2, (p_.x[i] - x_build_[i]).squaredNorm());
-    prepare_particle(i, inv_dt);
+  for (const DriftResult& d : drift_t) {
+    max_disp2 = std::max(max_disp2, d.max_disp2);
+    bad = std::max(bad, d.bad);
   }
   // The forces are zeroed now: should anything below throw, the next step recomputes them.
   forces_valid_ = false;
@@ -324,13 +333,8 @@ void World::step() {
   time_ += dt;
   ++step_;
   prepared_ = true;
-  compute_forces();
+  compute_forces(true, defer ? Finish::Defer : Finish::ReduceKick);
   forces_valid_ = true;
-#pragma omp parallel for schedule(static) num_threads(nt)
-  for (long i = 0; i < n; ++i) {
-    p_.v[i] += (0.5 * dt * p_.inv_m[i]) * p_.f[i];
-    p_.w[i] += (0.5 * dt * p_.inv_i[i]) * p_.t[i];
-  }
   check_guards();
   if (load_peak_from_ != kInf) {
     // Running mean over ~load_smoothing_ steps: the plate force of a small pellet jumps at
@@ -339,13 +343,22 @@ void World::step() {
     load_smoothed_ = load_smoothed_ == -kInf ? f : load_smoothed_ + (f - load_smoothed_) / load_smoothing_;
     if (load_marker() >= load_peak_from_) load_peak_ = std::max(load_peak_, load_smoothed_);
   }
-  if (step_ % params_.sample_interval == 0) record_sample();
+  if (step_ % params_.sample_interval == 0) {
+    finish_pending_kick();  // the sample's kinetic energy needs the step's velocities
+    record_sample();
+  }
 }
 
 void World::run(long steps) {
   require(steps >= 0, cat("steps = ", steps, " must be >= 0"));
   validate_time_step();
-  for (long s = 0; s < steps; ++s) step();
+  try {
+    for (long s = 0; s < steps; ++s) advance(true);
+  } catch (...) {
+    finish_pending_kick();
+    throw;
+  }
+  finish_pending_kick();
 }
 
 RunOutcome World::run_until(const std::vector<StopCondition>& conds, long max_steps) {
@@ -366,9 +379,20 @@ RunOutcome World::run_until(const std::vector<StopCondition>& conds, long max_st
   }
   validate_time_step();
   ensure_forces();
+  try {
+    const RunOutcome out = run_steps_until(conds, max_steps);
+    finish_pending_kick();
+    return out;
+  } catch (...) {
+    finish_pending_kick();
+    throw;
+  }
+}
+
+RunOutcome World::run_steps_until(const std::vector<StopCondition>& conds, long max_steps) {
   RunOutcome out;
   for (long s = 0; s < max_steps; ++s) {
-    step();
+    advance(true);
     ++out.steps;
     for (std::size_t k = 0; k < conds.size(); ++k) {
       const StopCondition& c = conds[k];
@@ -380,8 +404,14 @@ RunOutcome World::run_until(const std::vector<StopCondition>& conds, long max_st
       switch (c.kind) {
         case StopKind::Time: hit = time_ >= c.value; break;
         case StopKind::Steps: hit = out.steps >= c.value; break;
-        case StopKind::KineticEnergyBelow: hit = kinetic_energy() < c.value; break;
-        case StopKind::InternalKineticEnergyBelow: hit = internal_kinetic_energy() < c.value; break;
+        case StopKind::KineticEnergyBelow:
+          finish_pending_kick();
+          hit = kinetic_energy() < c.value;
+          break;
+        case StopKind::InternalKineticEnergyBelow:
+          finish_pending_kick();
+          hit = internal_kinetic_energy() < c.value;
+          break;
         case StopKind::WallForceAbove: hit = walls_[c.wall].normal_force() >= c.value; break;
         case StopKind::WallForceBelow: hit = walls_[c.wall].normal_force() <= c.value; break;
         case StopKind::WallTravelAbove: hit = walls_[c.wall].travel >= c.value; break;

@@ -140,7 +140,8 @@ class HystereticLaw {
   // k2 (1 + a delta0) (delta - delta0) = f with a = unloading_growth / r*, solved for the
   // root that tends to delta - f / k2 as a -> 0 (written so it does not cancel).
   PELLETDEM_INLINE double residual_for(double delta, double f, double k2, double r_eff) const {
-    const double c = delta - f / k2;
+    // f times 1/k2, not f / k2: the pair kernel hoists the reciprocal of its constant k2.
+    const double c = delta - f * (1.0 / k2);
     if (p_.unloading_growth <= 0.0) return c;
     const double a = p_.unloading_growth / r_eff;
     const double b = 1.0 - a * delta;
@@ -178,18 +179,19 @@ class HystereticLaw {
       fn -= p_.normal_damping_ratio * 2.0 * std::sqrt(c.m_eff * s * p_.k2) * c.vn;
     const double kt = s * p_.kt_ratio * p_.k1;
     // Keep the stored spring in the current tangent plane at its old length, so a rotating
-    // pair neither loses nor gains spring force.
-    const double old_len = h.ft.norm();
+    // pair neither loses nor gains spring force. Squared lengths, one root: the pair kernel's
+    // throughput is bound by its roots and divisions.
+    const double old2 = h.ft.squaredNorm();
     h.ft -= h.ft.dot(c.n) * c.n;
-    const double new_len = h.ft.norm();
-    if (new_len > 0.0) h.ft *= old_len / new_len;
+    const double new2 = h.ft.squaredNorm();
+    if (new2 > 0.0) h.ft *= std::sqrt(old2 / new2);
     h.ft -= kt * dt * c.vt;  // eq. 9, incremental spring
     const double gamma_t = damping_factor_ * std::sqrt(c.m_eff * kt);  // eq. 10
     Vec3 ft = h.ft - gamma_t * c.vt;
     const double limit = mu * std::max(fn, 0.0);
-    const double ft_len = ft.norm();
-    if (ft_len > limit) {  // Coulomb: slide, keep the spring at the limit
-      ft = (ft_len > 0.0) ? Vec3(ft * (limit / ft_len)) : Vec3::Zero();
+    const double ft2 = ft.squaredNorm();
+    if (ft2 > limit * limit) {  // Coulomb: slide, keep the spring at the limit
+      ft = (ft2 > 0.0) ? Vec3(ft * (limit / std::sqrt(ft2))) : Vec3::Zero();
       h.ft = ft;
     }
     return {fn, ft};

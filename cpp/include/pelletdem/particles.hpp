@@ -15,28 +15,30 @@ struct alignas(32) PosRad {
 };
 static_assert(sizeof(PosRad) == 32, "PosRad is four packed doubles");
 
-// What the contact kernels read of a particle besides (x, r), packed as three runs of four
-// doubles (two cache lines where five arrays took five): velocity and mass, angular velocity
-// and the rolling-friction cap |w| / (dt / I), and the rolling direction w / |w| (eq. 11).
-// compute_forces (or step's drift loop) writes it from the particle arrays before the pairs.
-struct alignas(32) Motion {
+// What the contact kernels read of a particle besides (x, r), packed as two runs of four
+// doubles in one cache line: velocity and mass, angular velocity and the rolling-friction cap
+// |w| I / dt of eq. 11. compute_forces (or step's drift pass) writes it from the particle
+// arrays before the pairs.
+struct alignas(64) Motion {
   double vx, vy, vz, m;
   double wx, wy, wz, roll_cap;
-  double dx, dy, dz, unused;
-  Vec3 roll_dir() const { return Vec3(dx, dy, dz); }
 };
-static_assert(sizeof(Motion) == 96, "Motion is three runs of four doubles");
+static_assert(sizeof(Motion) == 64, "Motion is two runs of four doubles");
 
 // A thread's sum of the contact and bond forces and torques on one particle, in one 64-byte
 // record: the kernels add a pair's four results with one 32-byte load, add and store each
 // (a Vec3 took three of each, after taking the lanes apart one double at a time), and a
 // particle's force and torque share a cache line. compute_forces adds the threads' records
 // into Particles::f and t.
+// Rolling friction (eq. 11) turns every contact's moment against the body's own spin, along
+// -w/|w|: the kernels add only its magnitude, `roll`, in the torque row's fourth double, and
+// compute_forces turns the sum into a torque once per particle (the direction's three doubles
+// per particle then never pass through the pair kernels).
 struct alignas(64) Load {
   Vec3 f = Vec3::Zero();
   double unused_f = 0.0;  // stays 0: the kernels add 0 to it
   Vec3 t = Vec3::Zero();
-  double unused_t = 0.0;
+  double roll = 0.0;      // sum of min(m_r f_n r, cap) over the contacts (eq. 11), N m
 };
 static_assert(sizeof(Load) == 64, "Load is two runs of four doubles");
 

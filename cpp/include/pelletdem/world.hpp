@@ -8,6 +8,7 @@
 
 #include "pelletdem/bonds.hpp"
 #include "pelletdem/contact_law.hpp"
+#include "pelletdem/integrate.hpp"
 #include "pelletdem/neighbor.hpp"
 #include "pelletdem/particles.hpp"
 #include "pelletdem/state.hpp"
@@ -180,31 +181,34 @@ class World {
 
  private:
   void ensure_forces();
-  // compute_forces' work on particle i before the pair loop: zero thread 0's Load, pack
-  // its position and radius, velocity, mass and rolling-friction direction and cap (eq. 11). step() does
-  // it in its drift loop, which reads the same memory, and sets prepared_ so that
-  // compute_forces does not do it again.
-  PELLETDEM_INLINE void prepare_particle(long i, double inv_dt) {
-    loads_[0][i] = Load{};
-    const Vec3 &x = p_.x[i], &v = p_.v[i], &w = p_.w[i];
-    const double m = p_.m[i], r = p_.r[i];
-    double cap = 0.0;
-    Vec3 dir = Vec3::Zero();
-    if (params_.contact.rolling > 0.0) {
-      // One square root and one division per particle: this loop ran latency-bound on a
-      // chain of a root and four divisions (9 % of a step on the settled 10,000 bed).
-      const double wl = w.norm();
-      cap = wl * sphere_inertia(m, r) * inv_dt;  // |w| I / dt
-      const double inv = wl != 0.0 ? 1.0 / wl : 0.0;
-      dir = w * inv;
-    }
-    xr_[i] = PosRad{x.x(), x.y(), x.z(), r};
-    mo_[i] = Motion{v.x(), v.y(), v.z(), m, w.x(), w.y(), w.z(), cap,
-                    dir.x(), dir.y(), dir.z(), 0.0};
-  }
   void size_particle_scratch();
-  void compute_forces(bool advance = true);
-  void wall_forces(bool advance = true);
+  // Forces and torques of the present positions (springs advanced by a step unless `advance`
+  // is false) into the threads' Load buffers, and then (Finish) into Particles::f and t, with
+  // step()'s closing half kick, or left in the buffers for the next step's drift pass to sum
+  // and kick (run() and run_until() step that way: one pass over the particles less a step).
+  enum class Finish { Reduce, ReduceKick, Defer };
+  void compute_forces(bool advance = true, Finish finish = Finish::Reduce);
+  // The deferred closing half kick (Finish::Defer) done now: f, t, v, w are then the step's.
+  // Whatever reads them between steps calls it; run() and run_until() call it before they
+  // return or throw.
+  void finish_pending_kick();
+  LoadSums load_sums(int nt) const;
+  void advance(bool defer);  // one step; defer: Finish::Defer
+  RunOutcome run_steps_until(const std::vector<StopCondition>& conds, long max_steps);
+  bool kick_pending_ = false;
+  int kick_nt_ = 1;  // threads of the force pass whose kick is pending
+  // The walls' part of compute_forces: start_walls zeroes the walls' sums and says how many
+  // threads share the wall contacts; wall_share adds thread tid's share to its Load buffer A
+  // and to its WallPart; finish_walls adds the parts up in thread order.
+  struct WallPart {
+    Vec3 force = Vec3::Zero(), torque = Vec3::Zero();
+    double radial = 0.0, max_ov = 0.0;
+    Index max_ov_i = 0;
+  };
+  int start_walls(int nt);
+  void wall_share(int tid, int nt_walls, double dt_inc, Load* A);
+  void finish_walls(int nt_walls);
+  std::vector<WallPart> wall_part_;
   void move_walls();
   void rebuild();
   void build_wall_lists();
@@ -223,9 +227,10 @@ class World {
   std::vector<Vec3> x_build_;
   std::vector<std::vector<Load>> loads_;  // per thread: its share of the forces (Load)
   // Positions and radii, and velocities, masses and rolling-friction terms (eq. 11), packed
-  // for the contact kernels; refreshed by every force pass (prepare_particle).
+  // for the contact kernels; refreshed by every force pass (pack_particles).
   std::vector<PosRad> xr_;
   std::vector<Motion> mo_;
+  std::vector<double> spin_inv_;  // 1 / |w| (0 for a body at rest), 1/(rad/s): eq. 11's direction
   std::vector<int> load_walls_;
   std::vector<Sample> samples_;
   std::vector<std::vector<WallSample>> wall_samples_;
@@ -238,7 +243,7 @@ class World {
   Index max_overlap_i_ = 0;
   bool forces_valid_ = false;
   bool list_valid_ = false;
-  bool prepared_ = false;  // prepare_particle done for every particle since the last forces
+  bool prepared_ = false;  // records packed (step's drift pass) since the last forces
   bool vector_kernels_ = true;
   double ramp_start_ = 0.0, ramp_duration_ = -1.0;
   double load_peak_from_ = std::numeric_limits<double>::infinity(), load_peak_ = 0.0;
