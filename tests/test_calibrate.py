@@ -528,19 +528,28 @@ MAX_DLD = 0.15
 
 def test_recovers_sigma_c_on_tiny_pellet():
     """Synthetic data from the engine at known (E_b, sigma_c), then a 1-parameter fit of sigma_c
-    at that E_b from a start a factor 2 off. Tolerance: the fit stops within 1 SD (5%) of the
-    synthetic sigma_f and dL_f/D; sigma_c must come back within 15% (the tiny pellet's sigma_f
-    scatters by ~5% between bond laws a few % apart, and grows as sigma_c^1.3)."""
+    at that E_b from a start a factor 2 off. Tolerance: the fit stops within 1 SD of the
+    synthetic sigma_f (SD 5%) and dL_f/D (SD 10%); sigma_c must come back within 15% (the tiny
+    pellet's sigma_f scatters by ~5% between bond laws a few % apart, and grows as sigma_c^1.3).
+    Its dL_f/D is no smooth function of sigma_c at this size: sigma_c = 8.4-9.6 MPa in steps of
+    0.2 gave dL_f/D 0.102-0.122 in no order (SD 7 %, 2026-12-04), so an SD of 5 % made the
+    fit's success a matter of which rounding the build had. For the same reason the fit may
+    stop where its local model puts the optimum (within min_step of its best point), or find
+    no better point within a small step, with a loss a little above tol: builds differing in
+    rounding stopped at sigma_c = 9.8 MPa (loss 1.21) and 9.3 MPa (loss 1.19). Those stops are
+    the fit's own; the loss must be below 2."""
     t0 = time.perf_counter()
     spec = C.make_spec({"E_b": TRUE_E_B, "sigma_c": TRUE_SIGMA_C}, max_dLD=MAX_DLD, **TINY)
     truth = C.run_point(spec)
     assert truth["ok"], truth["error"]
     out = truth["outputs"]
     tg = C.Targets(sigma_z=120e6, sigma_f=out["sigma_f"], sigma_f_sd=0.05 * out["sigma_f"],
-                   dLf_D=out["dLf_D"], dLf_D_sd=0.05 * out["dLf_D"], label="synthetic")
+                   dLf_D=out["dLf_D"], dLf_D_sd=0.10 * out["dLf_D"], label="synthetic")
     r = C.fit({"sigma_c": (1e6, 1e8, TRUE_SIGMA_C / 2)}, tg, fixed={"E_b": TRUE_E_B}, preset="tiny",
               max_dLD=MAX_DLD, tol=1.0, max_runs=6, executor="serial")
-    assert r.converged, (r.message, r.history)
+    # Stopped by its own criteria (loss <= tol, or no better point nearby), not by max_runs.
+    assert r.converged or "min_step" in r.message or r.message.startswith("no better point"), (r.message, r.history)
+    assert r.loss < 2.0, (r.message, r.history)
     assert r.params["sigma_c"] == pytest.approx(TRUE_SIGMA_C, rel=0.15)
     assert r.n_relaxations == 0  # the relaxed pellet of the synthetic run was reused
     assert r.n_points <= 5
