@@ -753,13 +753,47 @@ void World::compute_forces(bool advance, Finish finish) {
   std::vector<Index> maxov_i_t(nt, 0);
   std::vector<std::vector<long>> broke_t(nt);
   const int nt_walls = start_walls(nt);
+  // Each thread takes a run of particles holding an equal share of the listed pairs, not of
+  // the particles: a compacted pellet is denser under the piston, and equal particle shares
+  // left one thread waiting for the other at the barrier (~11 % of a step in libgomp).
+  std::vector<long> run(nt + 1, n);
+  for (int t = 0; t < nt; ++t) {
+    const double target = static_cast<double>(nbr_.start[n]) * t / nt;
+    run[t] = std::lower_bound(nbr_.start.begin(), nbr_.start.begin() + n, target) - nbr_.start.begin();
+  }
+  load_range_.assign(2 * static_cast<std::size_t>(nt), 0);
   const LoadSums sums = load_sums(nt);
 
 #pragma omp parallel num_threads(nt)
   {
     const int tid = omp_get_thread_num();
     Load* A = loads_[tid].data();
-    if (tid > 0) std::fill(loads_[tid].begin(), loads_[tid].end(), Load{});
+    long lo = run[tid], hi = run[tid + 1];
+    long blo = 0, bhi = 0;
+    if (nbonds > 0) static_share(nbonds, nt, tid, blo, bhi);
+    if (tid > 0) {
+      // Thread t's buffer holds its pairs' particles, its bonds' and the wall contacts of its
+      // run: zeroing and summing only that range keeps the other core's half out of this
+      // one's cache (zeroing all N and reading it back across cores cost ~10 % of a
+      // two-thread step).
+      long rlo = lo, rhi = hi;
+      const Index* J = nbr_.j.data();
+      Index jmin = static_cast<Index>(lo), jmax = 0;
+      for (Index k = nbr_.start[lo]; k < nbr_.start[hi]; ++k) {
+        jmin = std::min(jmin, J[k]);
+        jmax = std::max(jmax, J[k]);
+      }
+      rlo = std::min<long>(rlo, jmin);
+      rhi = std::max<long>(rhi, static_cast<long>(jmax) + 1);
+      for (long b = blo; b < bhi; ++b) {
+        rlo = std::min<long>(rlo, std::min(bonds_[b].i, bonds_[b].j));
+        rhi = std::max<long>(rhi, std::max(bonds_[b].i, bonds_[b].j) + 1);
+      }
+      if (rhi <= rlo) rlo = rhi = 0;
+      load_range_[2 * tid] = rlo;
+      load_range_[2 * tid + 1] = rhi;
+      std::fill(loads_[tid].begin() + rlo, loads_[tid].begin() + rhi, Load{});
+    }
     if (!prepared_) {
       long lo, hi;
       static_share(n, nt, tid, lo, hi);
@@ -767,26 +801,15 @@ void World::compute_forces(bool advance, Finish finish) {
                      spin_inv_.data());
 #pragma omp barrier
     }
-    // Each thread takes a run of particles holding an equal share of the listed pairs, not of
-    // the particles: a compacted pellet is denser under the piston, and equal particle shares
-    // left one thread waiting for the other at the barrier (~11 % of a step in libgomp).
-    auto pair_share = [&](int t) -> long {
-      if (t >= nt) return n;
-      const double target = static_cast<double>(nbr_.start[n]) * t / nt;
-      return std::lower_bound(nbr_.start.begin(), nbr_.start.begin() + n, target) - nbr_.start.begin();
-    };
-    long lo = pair_share(tid), hi = pair_share(tid + 1);
     const PairStats ps = pair_loop(lo, hi, p_, xr_.data(), nbr_, law_, cp, dt_inc, adh, mo_.data(),
                                    A, vector_kernels_);
     // A thread's bonds add to its own buffers, so it goes on to them without waiting for the
     // others' pairs; the reduction below waits for all.
-    if (nbonds > 0) {
-      static_share(nbonds, nt, tid, lo, hi);
-      bond_loop(bonds_, lo, hi, p_, xr_.data(), mo_.data(), dt_inc, A, broke_t[tid],
+    if (nbonds > 0)
+      bond_loop(bonds_, blo, bhi, p_, xr_.data(), mo_.data(), dt_inc, A, broke_t[tid],
                 vector_kernels_);
-    }
-    // The walls' share of this thread goes into its own buffer as well.
-    if (tid < nt_walls) wall_share(tid, nt_walls, dt_inc, A);
+    // The wall contacts of this thread's run of particles go into its own buffer as well.
+    if (tid < nt_walls) wall_share(tid, nt_walls, nt_walls == 1 ? 0 : lo, nt_walls == 1 ? n : hi, dt_inc, A);
 #pragma omp barrier
     contacts_t[tid] = ps.contacts;
     maxov_t[tid] = ps.max_ov;
@@ -835,7 +858,8 @@ void World::compute_forces(bool advance, Finish finish) {
 }
 
 LoadSums World::load_sums(int nt) const {
-  return LoadSums{loads_.data(), nt, params_.gravity / params_.density_scale, spin_inv_.data()};
+  return LoadSums{loads_.data(), nt, params_.gravity / params_.density_scale, spin_inv_.data(),
+                  load_range_.data()};
 }
 
 void World::finish_pending_kick() {
@@ -869,15 +893,19 @@ int World::start_walls(int nt) {
   return nt_walls;
 }
 
-void World::wall_share(int tid, int nt_walls, double dt_inc, Load* A) {
+void World::wall_share(int tid, int nt_walls, long p_lo, long p_hi, double dt_inc, Load* A) {
   const ContactLawParams& cp = law_.params();
   const double adh = cp.wall_adhesion ? adhesion_scale() : 0.0;
   const int nw = wall_count();
   for (int wk = 0; wk < nw; ++wk) {
     Wall& w = walls_[wk];
     if (!w.active) continue;
-    long lo, hi;
-    static_share(static_cast<long>(w.contacts.size()), nt_walls, tid, lo, hi);
+    // The contacts are in particle order: those of particles [p_lo, p_hi).
+    auto first_of = [&](long i) {
+      return std::lower_bound(w.contacts.begin(), w.contacts.end(), i,
+                              [](const WallContact& c, long v) { return c.i < v; }) - w.contacts.begin();
+    };
+    const long lo = first_of(p_lo), hi = first_of(p_hi);
     // Crushing caps the loading force at p_y,plate pi r^2 (kHuge / r^2 stays finite).
     const double cap_scale = (w.crushable && cp.plate_yield_stress > 0.0) ? kPi * cp.plate_yield_stress : kHuge;
     WallPart& part = wall_part_[static_cast<std::size_t>(wk) * nt_walls + tid];

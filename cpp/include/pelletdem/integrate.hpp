@@ -27,6 +27,7 @@ struct LoadSums {
   int nt;
   Vec3 g;                         // gravity (divided by the density scale), m/s^2
   const double* spin_inv;         // 1 / |w| of the force pass (pack_particles), 1/(rad/s)
+  const long* range;              // buffer k > 0 holds particles [range[2k], range[2k+1])
 };
 
 // Force f and torque t on particle i from the buffers: the threads' sums, eq. 11's rolling
@@ -37,6 +38,7 @@ PELLETDEM_INLINE void sum_loads(const LoadSums& s, long i, const Particles& p, V
   t = a.t;
   double roll = a.roll;
   for (int k = 1; k < s.nt; ++k) {
+    if (i < s.range[2 * k] || i >= s.range[2 * k + 1]) continue;
     const Load& b = s.bufs[k][i];
     f += b.f;
     t += b.t;

@@ -199,14 +199,18 @@ class World {
   int kick_nt_ = 1;  // threads of the force pass whose kick is pending
   // The walls' part of compute_forces: start_walls zeroes the walls' sums and says how many
   // threads share the wall contacts; wall_share adds thread tid's share to its Load buffer A
-  // and to its WallPart; finish_walls adds the parts up in thread order.
+  // (the wall contacts of particles [p_lo, p_hi)) and to its WallPart; finish_walls adds the
+  // parts up in thread order.
   struct WallPart {
     Vec3 force = Vec3::Zero(), torque = Vec3::Zero();
     double radial = 0.0, max_ov = 0.0;
     Index max_ov_i = 0;
   };
   int start_walls(int nt);
-  void wall_share(int tid, int nt_walls, double dt_inc, Load* A);
+  void wall_share(int tid, int nt_walls, long p_lo, long p_hi, double dt_inc, Load* A);
+  // Particles [lo, hi) whose Load records thread t > 0 zeroed and filled in the last force
+  // pass, as (lo, hi) pairs per thread (thread 0's buffer covers every particle).
+  std::vector<long> load_range_;
   void finish_walls(int nt_walls);
   std::vector<WallPart> wall_part_;
   void move_walls();
