@@ -56,7 +56,7 @@ PELLETDEM_INLINE Pair dot3(const Pair& X, const Pair& Y, const Pair& Z, const Ve
 
 // Updates the bond's loads; adds its forces and torques to A unless it broke (then
 // returns true and adds nothing).
-PELLETDEM_INLINE bool update_bond(Bond& b, const Particles& p, double dt, Load* A) {
+PELLETDEM_INLINE bool update_bond(Bond& b, const Particles& p, const Motion* mo, double dt, Load* A) {
   const Index i = b.i, j = b.j;
   const Vec3 d = p.x[j] - p.x[i];
   const double dist = d.norm();
@@ -80,7 +80,8 @@ PELLETDEM_INLINE bool update_bond(Bond& b, const Particles& p, double dt, Load* 
     Y = y2;
     Z = z2;
   }
-  const double phi = 0.5 * (p.w[i] + p.w[j]).dot(n) * dt;
+  const Vec3 wi = mo[i].w(), wj = mo[j].w();
+  const double phi = 0.5 * (wi + wj).dot(n) * dt;
   if (phi != 0.0) {
     double s, cs;
     small_angle_sin_cos(phi, s, cs);
@@ -96,8 +97,8 @@ PELLETDEM_INLINE bool update_bond(Bond& b, const Particles& p, double dt, Load* 
 
   const double half_gap = 0.5 * (dist - p.r[i] - p.r[j]);
   const double ai = p.r[i] + half_gap, aj = p.r[j] + half_gap;
-  const Vec3 v_rel = p.v[j] - p.v[i] - (ai * p.w[i] + aj * p.w[j]).cross(n);
-  const Vec3 w_rel = p.w[j] - p.w[i];
+  const Vec3 v_rel = mo[j].v() - mo[i].v() - (ai * wi + aj * wj).cross(n);
+  const Vec3 w_rel = wj - wi;
   const Pair RX(v_rel.x(), w_rel.x()), RY(v_rel.y(), w_rel.y()), RZ(v_rel.z(), w_rel.z());
   const double area = b.area(), jpolar = b.polar_moment();
   // (fn, mn) -= (kn A, kt J) dt (v_rel . n, w_rel . n)
@@ -451,7 +452,8 @@ PELLETDEM_INLINE void contact_one(Index i, Index j, ContactHistory& h, const Par
   const double delta = rsum - dist;
   const Vec3 nv = d * (1.0 / dist);
   const double ai = ri - 0.5 * delta, aj = p.r[j] - 0.5 * delta;
-  const Vec3 v_rel = p.v[j] - p.v[i] - (ai * p.w[i] + aj * p.w[j]).cross(nv);
+  const Vec3 wi = mo[i].w(), wj = mo[j].w();
+  const Vec3 v_rel = mo[j].v() - mo[i].v() - (ai * wi + aj * wj).cross(nv);
   const double vn = v_rel.dot(nv);
   ContactKinematics c{delta, vn, v_rel - vn * nv, nv, ri * p.r[j] / rsum,
                       p.m[i] * p.m[j] / (p.m[i] + p.m[j])};
@@ -692,7 +694,7 @@ void bond_loop(std::vector<Bond>& bonds, long lo, long hi, const Particles& p, c
                const Motion* mo, double dt, Load* A, std::vector<long>& broke,
                bool vector_kernel) {
   auto one = [&](long b) {
-    if (update_bond(bonds[b], p, dt, A)) broke.push_back(b);
+    if (update_bond(bonds[b], p, mo, dt, A)) broke.push_back(b);
   };
 #ifdef PELLETDEM_LANES
   long idx[kLanes];
@@ -858,8 +860,8 @@ void World::compute_forces(bool advance, Finish finish) {
 }
 
 LoadSums World::load_sums(int nt) const {
-  return LoadSums{loads_.data(), nt, params_.gravity / params_.density_scale, spin_inv_.data(),
-                  load_range_.data()};
+  return LoadSums{loads_.data(), nt, params_.gravity / params_.density_scale, mo_.data(),
+                  spin_inv_.data(), load_range_.data()};
 }
 
 void World::finish_pending_kick() {
@@ -920,7 +922,7 @@ void World::wall_share(int tid, int nt_walls, long p_lo, long p_hi, double dt_in
       }
       const double delta = -gap;
       const double a = p_.r[i] - delta;  // lever arm to the contact point on the wall
-      const Vec3 v_rel = p_.v[i] - a * p_.w[i].cross(n_into) - w.surface_velocity(n_into);
+      const Vec3 v_rel = mo_[i].v() - a * mo_[i].w().cross(n_into) - w.surface_velocity(n_into);
       const double vn = v_rel.dot(n_into);
       ContactKinematics c{delta, vn, v_rel - vn * n_into, n_into, p_.r[i], p_.m[i], true, cap_scale * p_.r[i] * p_.r[i]};
       const ContactForce cf = law_.evaluate(c, wc.h, dt_inc, cp.mu_wall, adh);

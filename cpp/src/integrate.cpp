@@ -14,15 +14,16 @@ namespace {
 // at a time. One at a time they were ~a quarter of the drift pass, a divider latency each.
 constexpr long kBlock = 32;
 
+// The rest of a block's records once mo[i] holds v, m and w and len[k] = |w|^2: zeroed Load,
+// (x, r), and eq. 11's cap |w| I / dt and 1 / |w|.
 PELLETDEM_INLINE void pack_block(long b, long e, const Particles& p, double inv_dt, bool rolling,
-                                  Load* A0, PosRad* xr, Motion* mo, double* spin_inv) {
-  alignas(32) double len[kBlock], inertia[kBlock], cap[kBlock], inv[kBlock];
+                                  Load* A0, PosRad* xr, Motion* mo, double* spin_inv, double* len) {
+  alignas(32) double inertia[kBlock], cap[kBlock], inv[kBlock];
   const int nb = static_cast<int>(e - b);
   for (int k = 0; k < nb; ++k) {
     const long i = b + k;
     A0[i] = Load{};
     xr[i] = PosRad{p.x[i].x(), p.x[i].y(), p.x[i].z(), p.r[i]};
-    len[k] = p.w[i].squaredNorm();
     inertia[k] = sphere_inertia(p.m[i], p.r[i]);
   }
   if (rolling) {
@@ -47,10 +48,8 @@ PELLETDEM_INLINE void pack_block(long b, long e, const Particles& p, double inv_
     std::fill(inv, inv + nb, 0.0);
   }
   for (int k = 0; k < nb; ++k) {
-    const long i = b + k;
-    const Vec3 &v = p.v[i], &w = p.w[i];
-    mo[i] = Motion{v.x(), v.y(), v.z(), p.m[i], w.x(), w.y(), w.z(), cap[k]};
-    spin_inv[i] = inv[k];
+    mo[b + k].roll_cap = cap[k];
+    spin_inv[b + k] = inv[k];
   }
 }
 
@@ -66,8 +65,16 @@ PELLETDEM_INLINE void pack_block(long b, long e, const Particles& p, double inv_
 PELLETDEM_CLONES
 void pack_particles(long lo, long hi, const Particles& p, double inv_dt, bool rolling, Load* A0,
                     PosRad* xr, Motion* mo, double* spin_inv) {
-  for (long b = lo; b < hi; b += kBlock)
-    pack_block(b, std::min(hi, b + kBlock), p, inv_dt, rolling, A0, xr, mo, spin_inv);
+  alignas(32) double len[kBlock];
+  for (long b = lo; b < hi; b += kBlock) {
+    const long e = std::min(hi, b + kBlock);
+    for (long i = b; i < e; ++i) {
+      const Vec3 &v = p.v[i], &w = p.w[i];
+      mo[i] = Motion{v.x(), v.y(), v.z(), p.m[i], w.x(), w.y(), w.z(), 0.0};
+      len[i - b] = w.squaredNorm();
+    }
+    pack_block(b, e, p, inv_dt, rolling, A0, xr, mo, spin_inv, len);
+  }
 }
 
 PELLETDEM_CLONES
@@ -75,8 +82,11 @@ void reduce_loads(long lo, long hi, const LoadSums& s, double half_dt, Particles
   for (long i = lo; i < hi; ++i) {
     sum_loads(s, i, p, p.f[i], p.t[i]);
     if (half_dt > 0.0) {
-      p.v[i] += (half_dt * p.inv_m[i]) * p.f[i];
-      p.w[i] += (half_dt * p.inv_i[i]) * p.t[i];
+      Vec3 v = s.mo[i].v(), w = s.mo[i].w();
+      v += (half_dt * p.inv_m[i]) * p.f[i];
+      w += (half_dt * p.inv_i[i]) * p.t[i];
+      p.v[i] = v;
+      p.w[i] = w;
     }
   }
 }
@@ -87,24 +97,36 @@ DriftResult kick_drift_pack(long lo, long hi, double dt, bool rolling, Particles
                             double* spin_inv, const LoadSums* pending) {
   DriftResult out;
   const double inv_dt = 1.0 / dt;
+  alignas(32) double len[kBlock];
   for (long b = lo; b < hi; b += kBlock) {
     const long e = std::min(hi, b + kBlock);
     double sum_disp2 = 0.0;  // not finite iff some position is not (Eigen's allFinite per
                              // particle, three compares and branches, was 13 % of this pass)
     for (long i = b; i < e; ++i) {
       const double hm = 0.5 * dt * p.inv_m[i], hi_ = 0.5 * dt * p.inv_i[i];
+      Vec3 v, w;
       if (pending) {  // the last step's closing half kick (reduce_loads), then this one's
         Vec3 f, t;
         sum_loads(*pending, i, p, f, t);
-        p.v[i] += hm * f;
-        p.w[i] += hi_ * t;
-        p.v[i] += hm * f;
-        p.w[i] += hi_ * t;
+        v = mo[i].v();
+        w = mo[i].w();
+        v += hm * f;
+        w += hi_ * t;
+        v += hm * f;
+        w += hi_ * t;
+        mo[i].set_v(v);
+        mo[i].set_w(w);
       } else {
-        p.v[i] += hm * p.f[i];
-        p.w[i] += hi_ * p.t[i];
+        v = p.v[i];
+        w = p.w[i];
+        v += hm * p.f[i];
+        w += hi_ * p.t[i];
+        p.v[i] = v;
+        p.w[i] = w;
+        mo[i] = Motion{v.x(), v.y(), v.z(), p.m[i], w.x(), w.y(), w.z(), 0.0};
       }
-      p.x[i] += dt * p.v[i];
+      len[i - b] = w.squaredNorm();
+      p.x[i] += dt * v;
       const double disp2 = (p.x[i] - x_build[i]).squaredNorm();
       sum_disp2 += disp2;
       out.max_disp2 = std::max(out.max_disp2, disp2);
@@ -112,7 +134,7 @@ DriftResult kick_drift_pack(long lo, long hi, double dt, bool rolling, Particles
     if (!std::isfinite(sum_disp2))
       for (long i = b; i < e; ++i)
         if (!p.x[i].allFinite()) out.bad = i;
-    pack_block(b, e, p, inv_dt, rolling, A0, xr, mo, spin_inv);
+    pack_block(b, e, p, inv_dt, rolling, A0, xr, mo, spin_inv, len);
   }
   return out;
 }

@@ -26,7 +26,8 @@ struct LoadSums {
   const std::vector<Load>* bufs;  // buffers of threads 0 .. nt-1, added in that order
   int nt;
   Vec3 g;                         // gravity (divided by the density scale), m/s^2
-  const double* spin_inv;         // 1 / |w| of the force pass (pack_particles), 1/(rad/s)
+  const Motion* mo;               // v and w of the force pass (pack_particles)
+  const double* spin_inv;         // 1 / |w| of the force pass, 1/(rad/s)
   const long* range;              // buffer k > 0 holds particles [range[2k], range[2k+1])
 };
 
@@ -44,12 +45,12 @@ PELLETDEM_INLINE void sum_loads(const LoadSums& s, long i, const Particles& p, V
     t += b.t;
     roll += b.roll;
   }
-  t -= roll * (p.w[i] * s.spin_inv[i]);
+  t -= roll * (s.mo[i].w() * s.spin_inv[i]);
   f += p.m[i] * s.g;
 }
 
-// For particles [lo, hi): p.f and p.t from sum_loads, then (half_dt > 0) the closing half kick of a step,
-// v += half_dt f/m and w += half_dt t/I.
+// For particles [lo, hi): p.f and p.t from sum_loads, then (half_dt > 0) the closing half kick
+// of a step from the force pass's v and w (s.mo): p.v = v + half_dt f/m, p.w = w + half_dt t/I.
 void reduce_loads(long lo, long hi, const LoadSums& s, double half_dt, Particles& p);
 
 // For particles [lo, hi): zero A0, and write xr (position, radius), mo (velocity, mass, spin,
@@ -62,7 +63,8 @@ void pack_particles(long lo, long hi, const Particles& p, double inv_dt, bool ro
 // Reports the largest displacement from x_build and any non-finite position. With `pending`
 // (the last step's force pass left its sums in the buffers), reduce_loads' closing half kick
 // comes first, in the same pass: the same bits as the two passes one after the other. p.f and
-// p.t are then left as they were (finish_pending_kick or the next reduction writes them).
+// p.t, and p.v and p.w, are then left as they were: the velocities live in mo (Motion) until
+// finish_pending_kick or the next reduction writes them.
 DriftResult kick_drift_pack(long lo, long hi, double dt, bool rolling, Particles& p,
                             const Vec3* x_build, Load* A0, PosRad* xr, Motion* mo,
                             double* spin_inv, const LoadSums* pending);

@@ -18,10 +18,24 @@ static_assert(sizeof(PosRad) == 32, "PosRad is four packed doubles");
 // What the contact kernels read of a particle besides (x, r), packed as two runs of four
 // doubles in one cache line: velocity and mass, angular velocity and the rolling-friction cap
 // |w| I / dt of eq. 11. compute_forces (or step's drift pass) writes it from the particle
-// arrays before the pairs.
+// arrays before the pairs. Inside run() it is the working copy of v and w: the drift pass
+// updates them here in place and Particles::v and w are written when the run pauses
+// (World::finish_pending_kick), which spares the pass two streams over the particles.
 struct alignas(64) Motion {
   double vx, vy, vz, m;
   double wx, wy, wz, roll_cap;
+  Vec3 v() const { return Vec3(vx, vy, vz); }
+  Vec3 w() const { return Vec3(wx, wy, wz); }
+  void set_v(const Vec3& a) {
+    vx = a.x();
+    vy = a.y();
+    vz = a.z();
+  }
+  void set_w(const Vec3& a) {
+    wx = a.x();
+    wy = a.y();
+    wz = a.z();
+  }
 };
 static_assert(sizeof(Motion) == 64, "Motion is two runs of four doubles");
 
