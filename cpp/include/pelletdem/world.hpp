@@ -208,11 +208,11 @@ class World {
   };
   int start_walls(int nt);
   void wall_share(int tid, int nt_walls, long p_lo, long p_hi, double dt_inc, Load* A);
+  void finish_walls(int nt_walls);
+  std::vector<WallPart> wall_part_;
   // Particles [lo, hi) whose Load records thread t > 0 zeroed and filled in the last force
   // pass, as (lo, hi) pairs per thread (thread 0's buffer covers every particle).
   std::vector<long> load_range_;
-  void finish_walls(int nt_walls);
-  std::vector<WallPart> wall_part_;
   void move_walls();
   void rebuild();
   void build_wall_lists();
