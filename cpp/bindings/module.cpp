@@ -275,6 +275,7 @@ py::dict state_to_dict(const WorldState& s) {
   d["load_smoothing"] = s.load_smoothing; d["load_smoothed"] = s.load_smoothed;
   d["x"] = copy_vec3(s.x); d["v"] = copy_vec3(s.v); d["w"] = copy_vec3(s.w); d["f"] = copy_vec3(s.f); d["t"] = copy_vec3(s.t);
   d["r"] = copy_vector(s.r); d["m"] = copy_vector(s.m);
+  if (!s.x_build.empty()) d["x_build"] = copy_vec3(s.x_build);
   d["contact_i"] = copy_vector(s.ci); d["contact_j"] = copy_vector(s.cj);
   d["contact_delta0"] = copy_vector(s.c_delta0); d["contact_ft"] = copy_vec3(s.c_ft);
   py::list walls;
@@ -314,6 +315,8 @@ WorldState state_from_dict(const py::dict& d) {
   if (d.contains("load_smoothed")) s.load_smoothed = d["load_smoothed"].cast<double>();
   s.x = vec3_from(d, "x"); s.v = vec3_from(d, "v"); s.w = vec3_from(d, "w"); s.f = vec3_from(d, "f"); s.t = vec3_from(d, "t");
   s.r = from_array<double>(d, "r"); s.m = from_array<double>(d, "m");
+  // Positions of the last list build: optional (older files have none).
+  if (d.contains("x_build")) s.x_build = vec3_from(d, "x_build");
   s.ci = from_array<Index>(d, "contact_i"); s.cj = from_array<Index>(d, "contact_j");
   s.c_delta0 = from_array<double>(d, "contact_delta0"); s.c_ft = vec3_from(d, "contact_ft");
   for (auto item : d["walls"].cast<py::list>()) s.walls.push_back(wall_from_dict(item.cast<py::dict>()));

@@ -54,50 +54,64 @@ PELLETDEM_INLINE Pair dot3(const Pair& X, const Pair& Y, const Pair& Z, const Ve
   return (X * a.x() + Y * a.y()) + Z * a.z();
 }
 
-// Updates the bond's loads; adds its forces and torques to A unless it broke (then
-// returns true and adds nothing).
-PELLETDEM_INLINE bool update_bond(Bond& b, const Particles& p, const Motion* mo, double dt, Load* A) {
-  const Index i = b.i, j = b.j;
+// The kinematics of pair (i, j) that its contact and its bond share.
+struct PairGeometry {
+  Vec3 n;         // unit normal from i to j
+  double delta;   // overlap r_i + r_j - |x_j - x_i|, m (< 0: a gap)
+  double ai, aj;  // lever arms from the centres to the contact point, m
+  Vec3 wi, wj;    // spins, rad/s
+  Vec3 v_rel;     // velocity of j relative to i at the contact point, m/s
+};
+
+PELLETDEM_INLINE PairGeometry pair_geometry(Index i, Index j, const Particles& p, const Motion* mo) {
+  PairGeometry g;
   const Vec3 d = p.x[j] - p.x[i];
-  const double dist = d.norm();
-  const Vec3 n = d * (1.0 / dist);
+  const double dist = std::sqrt(d.squaredNorm());
+  g.delta = (p.r[i] + p.r[j]) - dist;
+  g.n = d * (1.0 / dist);
+  g.ai = p.r[i] - 0.5 * g.delta;
+  g.aj = p.r[j] - 0.5 * g.delta;
+  g.wi = mo[i].w();
+  g.wj = mo[j].w();
+  g.v_rel = mo[j].v() - mo[i].v() - (g.ai * g.wi + g.aj * g.wj).cross(g.n);
+  return g;
+}
+
+// Updates the bond's loads from the pair's kinematics g. Unless it broke (then it returns
+// true), f is its force on j and ti, tj its torques on i and j.
+PELLETDEM_INLINE bool bond_one(Bond& b, const PairGeometry& g, double dt, Vec3& f, Vec3& ti, Vec3& tj) {
+  const Vec3& n = g.n;
   // (ft, mt) component by component: X = (ft.x, mt.x), Y = (ft.y, mt.y), Z = (ft.z, mt.z).
   Pair X(b.ft.x(), b.mt.x()), Y(b.ft.y(), b.mt.y()), Z(b.ft.z(), b.mt.z());
   // Turn the stored shear force and bending moment with the pair: first the tilt of the
-  // normal (the smallest rotation taking n_prev to n, R v = c v + u x v + u (u.v) / (1 + c)
-  // with u = n_prev x n, c = n_prev.n: exact, no square root), then the mean spin about n.
-  // A rigid rotation of the pair then leaves them as they were in the bond's own frame.
-  const Vec3 u = b.n_prev.cross(n);
+  // normal, then the mean spin about n. A rigid rotation of the pair then leaves them as they
+  // were in the bond's own frame. The tilt is the smallest rotation taking a = n_prev to n,
+  // two reflections: R v = v + 2 n (a.v) - s (s.v) / (1 + c) with s = a + n, c = a.n (exact,
+  // no square root). Its middle term lies along n, which the projection below removes, so it
+  // is left out: v - s (s.v) / (1 + c) has R v's part in the bond plane.
   const double c = b.n_prev.dot(n);
-  if (u.squaredNorm() > 1e-28 && c > -0.5) {  // (a reversal in one step never happens)
+  if (c > -0.5) {  // (a reversal in one step never happens)
+    const Vec3 sv = b.n_prev + n;
     const double k = 1.0 / (1.0 + c);
-    const Pair ku = k * dot3(X, Y, Z, u);  // k (u . v)
-    // c v + u x v + (k u.v) u
-    const Pair x2 = (c * X + (u.y() * Z - u.z() * Y)) + ku * u.x();
-    const Pair y2 = (c * Y + (u.z() * X - u.x() * Z)) + ku * u.y();
-    const Pair z2 = (c * Z + (u.x() * Y - u.y() * X)) + ku * u.z();
-    X = x2;
-    Y = y2;
-    Z = z2;
+    const Pair t = k * dot3(X, Y, Z, sv);  // k (s . v)
+    X -= t * sv.x();
+    Y -= t * sv.y();
+    Z -= t * sv.z();
   }
-  const Vec3 wi = mo[i].w(), wj = mo[j].w();
+  const Vec3 &wi = g.wi, &wj = g.wj;
   const double phi = 0.5 * (wi + wj).dot(n) * dt;
-  if (phi != 0.0) {
-    double s, cs;
-    small_angle_sin_cos(phi, s, cs);
-    // Rotation about n, cs v + s n x v; the component along n is projected out below.
-    const Pair x2 = cs * X + s * (n.y() * Z - n.z() * Y);
-    const Pair y2 = cs * Y + s * (n.z() * X - n.x() * Z);
-    const Pair z2 = cs * Z + s * (n.x() * Y - n.y() * X);
-    X = x2;
-    Y = y2;
-    Z = z2;
-  }
+  double s, cs;
+  small_angle_sin_cos(phi, s, cs);
+  // Rotation about n, cs v + s n x v; the component along n is projected out below.
+  const Pair x2 = cs * X + s * (n.y() * Z - n.z() * Y);
+  const Pair y2 = cs * Y + s * (n.z() * X - n.x() * Z);
+  const Pair z2 = cs * Z + s * (n.x() * Y - n.y() * X);
+  X = x2;
+  Y = y2;
+  Z = z2;
   b.n_prev = n;
 
-  const double half_gap = 0.5 * (dist - p.r[i] - p.r[j]);
-  const double ai = p.r[i] + half_gap, aj = p.r[j] + half_gap;
-  const Vec3 v_rel = mo[j].v() - mo[i].v() - (ai * wi + aj * wj).cross(n);
+  const Vec3& v_rel = g.v_rel;
   const Vec3 w_rel = wj - wi;
   const Pair RX(v_rel.x(), w_rel.x()), RY(v_rel.y(), w_rel.y()), RZ(v_rel.z(), w_rel.z());
   const double area = b.area(), jpolar = b.polar_moment();
@@ -160,13 +174,26 @@ PELLETDEM_INLINE bool update_bond(Bond& b, const Particles& p, const Motion* mo,
   // n x ft
   const Vec3 nxft(n.y() * Z[0] - n.z() * Y[0], n.z() * X[0] - n.x() * Z[0],
                   n.x() * Y[0] - n.y() * X[0]);
-  const Vec3 f_on_j(FX[0], FY[0], FZ[0]), moment(FX[1], FY[1], FZ[1]);
-  A[j].f += f_on_j;
-  A[i].f -= f_on_j;
-  A[i].t += -ai * nxft - moment;
-  A[j].t += -aj * nxft + moment;
+  const Vec3 moment(FX[1], FY[1], FZ[1]);
+  f = Vec3(FX[0], FY[0], FZ[0]);
+  ti = -g.ai * nxft - moment;
+  tj = -g.aj * nxft + moment;
   return false;
 }
+
+// A bond whose pair is not in the neighbour list (stretched past it) on its own: its loads
+// updated and added to A, unless it broke (then returns true and adds nothing).
+PELLETDEM_INLINE bool update_bond(Bond& b, const Particles& p, const Motion* mo, double dt, Load* A) {
+  const PairGeometry g = pair_geometry(b.i, b.j, p, mo);
+  Vec3 f, ti, tj;
+  if (bond_one(b, g, dt, f, ti, tj)) return true;
+  A[b.j].f += f;
+  A[b.i].f -= f;
+  A[b.i].t += ti;
+  A[b.j].t += tj;
+  return false;
+}
+
 
 // --- Lanes: four bonds, or four contacts, at a time -----------------------------------------
 // The same arithmetic as update_bond (and contact_one, below), written on vectors of kLanes
@@ -287,14 +314,28 @@ PELLETDEM_INLINE void store_run(Obj* const* g, std::size_t offset, Lane c0, Lane
   store4(reinterpret_cast<char*>(g[2]) + offset, r.c2);
   store4(reinterpret_cast<char*>(g[3]) + offset, r.c3);
 }
-// Horizontal OR and AND of a mask (lanes all ones or all zeros), in two shuffles.
+// For each 4-bit lane mask m: the lanes set in it, in order (offset[m], the rest 0), and how
+// many there are (count[m]). The pair loop's queues append four lanes' pairs with them.
+typedef std::uint32_t LaneOffsets __attribute__((vector_size(kLanes * sizeof(std::uint32_t))));
+struct LaneList {
+  std::uint32_t offset[1 << kLanes][kLanes];
+  int count[1 << kLanes];
+};
+constexpr LaneList make_lane_list() {
+  LaneList t{};
+  for (int m = 0; m < (1 << kLanes); ++m) {
+    int c = 0;
+    for (int l = 0; l < kLanes; ++l)
+      if (m >> l & 1) t.offset[m][c++] = static_cast<std::uint32_t>(l);
+    t.count[m] = c;
+  }
+  return t;
+}
+constexpr LaneList kLaneList = make_lane_list();
+// Horizontal OR of a mask (lanes all ones or all zeros), in two shuffles.
 PELLETDEM_INLINE bool lane_any(LaneMask m) {
   const LaneMask h = m | __builtin_shufflevector(m, m, 2, 3, 0, 1);
   return (h | __builtin_shufflevector(h, h, 1, 0, 3, 2))[0] != 0;
-}
-PELLETDEM_INLINE bool lane_all(LaneMask m) {
-  const LaneMask h = m & __builtin_shufflevector(m, m, 2, 3, 0, 1);
-  return (h & __builtin_shufflevector(h, h, 1, 0, 3, 2))[0] != 0;
 }
 // Adds four pairs' results to the particle loads: force f on j and -f on i, torques ti on i
 // and tj on j with rolling moments rolli and rollj (Load::roll), lane by lane in the scalar
@@ -323,74 +364,79 @@ PELLETDEM_INLINE void add_loads(Load* A, const Index* gi, const Index* gj, const
   }
 }
 
-// Updates the kLanes intact bonds g[0..] and adds their forces and torques to A in bond
-// order. Returns false, having changed nothing, when a bond needs the scalar path.
-PELLETDEM_INLINE bool update_bond_group(Bond* const* g, const PosRad* xr, const Motion* mo,
-                                        double dt, Load* A) {
-  Index bi[kLanes], bj[kLanes];
-  for (int k = 0; k < kLanes; ++k) {
-    bi[k] = g[k]->i;
-    bj[k] = g[k]->j;
-  }
-  // Particle values are gathered just before they are needed, which keeps the registers free.
-  const L4 pi = load_posrad(xr, bi), pj = load_posrad(xr, bj);
-  const L3 xi{pi.c0, pi.c1, pi.c2}, xj{pj.c0, pj.c1, pj.c2};
+// pair_geometry of four pairs, lane by lane, with the particle values the contact law needs
+// besides (masses, and the rolling-friction caps of eq. 11).
+struct PairLanes {
+  Lane ri, rj, delta, ai, aj, mi, mj, cap_i, cap_j;
+  L3 n, wi, wj, v_rel;
+};
+
+PELLETDEM_INLINE PairLanes pair_lanes(const Index* gi, const Index* gj, const PosRad* xr, const Motion* mo) {
+  PairLanes q;
+  const L4 pi = load_posrad(xr, gi), pj = load_posrad(xr, gj);
+  q.ri = pi.c3;
+  q.rj = pj.c3;
+  const L3 d{pj.c0 - pi.c0, pj.c1 - pi.c1, pj.c2 - pi.c2};
+  const Lane rsum = q.ri + q.rj;
+  const Lane dist2 = lane_dot(d, d);
+  Lane dist;
+  for (int k = 0; k < kLanes; ++k) dist[k] = std::sqrt(dist2[k]);
+  q.delta = rsum - dist;
+  const Lane inv_dist = 1.0 / dist;
+  q.n = {d.x * inv_dist, d.y * inv_dist, d.z * inv_dist};
+  q.ai = q.ri - 0.5 * q.delta;
+  q.aj = q.rj - 0.5 * q.delta;
+  const L4 spin_i = load_motion(mo, gi, kRunSpin), spin_j = load_motion(mo, gj, kRunSpin);
+  q.wi = {spin_i.c0, spin_i.c1, spin_i.c2};
+  q.wj = {spin_j.c0, spin_j.c1, spin_j.c2};
+  q.cap_i = spin_i.c3;
+  q.cap_j = spin_j.c3;
+  const L3 lever{q.ai * q.wi.x + q.aj * q.wj.x, q.ai * q.wi.y + q.aj * q.wj.y, q.ai * q.wi.z + q.aj * q.wj.z};
+  const L3 lxn = lane_cross(lever, q.n);
+  const L4 vel_i = load_motion(mo, gi, kRunVel), vel_j = load_motion(mo, gj, kRunVel);
+  q.mi = vel_i.c3;
+  q.mj = vel_j.c3;
+  q.v_rel = {(vel_j.c0 - vel_i.c0) - lxn.x, (vel_j.c1 - vel_i.c1) - lxn.y, (vel_j.c2 - vel_i.c2) - lxn.z};
+  return q;
+}
+
+// bond_one on the kLanes intact bonds g[0..] of the pairs q: their loads updated, f their
+// forces on j, ti and tj their torques. Returns false, having changed nothing, when a bond
+// needs the scalar path.
+PELLETDEM_INLINE bool bond_lanes(Bond* const* g, const PairLanes& q, double dt, bool damage, L3& f,
+                                 L3& ti, L3& tj) {
   const L4 run_n = load_run(g, kRunNormal), run_s = load_run(g, kRunShear), run_b = load_run(g, kRunBend);
   const L3 np{run_n.c0, run_n.c1, run_n.c2};
   L3 ft{run_s.c0, run_s.c1, run_s.c2};
   L3 mt{run_b.c0, run_b.c1, run_b.c2};
-  const L3 d{xj.x - xi.x, xj.y - xi.y, xj.z - xi.z};
-  const Lane dist2 = lane_dot(d, d);
-  Lane dist;
-  for (int k = 0; k < kLanes; ++k) dist[k] = std::sqrt(dist2[k]);
-  const Lane inv = 1.0 / dist;
-  const L3 n{d.x * inv, d.y * inv, d.z * inv};
-  // Tilt of the normal (see update_bond)
-  const L3 u = lane_cross(np, n);
+  const L3& n = q.n;
+  // Tilt of the normal (see bond_one); a reversal (c <= -0.5) goes to the scalar path.
   const Lane c = lane_dot(np, n);
-  const LaneMask tilt = (lane_dot(u, u) > 1e-28) & (c > -0.5);
-  if (lane_any(tilt)) {
-    const bool all = lane_all(tilt);  // the rule in a moving bed: no select needed
-    const Lane k = 1.0 / (1.0 + c);
-    auto turn = [&](L3& v) {
-      const Lane ku = k * lane_dot(u, v);
-      const L3 uxv = lane_cross(u, v);
-      const L3 r{(c * v.x + uxv.x) + ku * u.x, (c * v.y + uxv.y) + ku * u.y,
-                 (c * v.z + uxv.z) + ku * u.z};
-      v = all ? r : lane_select(tilt, r, v);
-    };
-    turn(ft);
-    turn(mt);
-  }
-  const L4 spin_i = load_motion(mo, bi, kRunSpin), spin_j = load_motion(mo, bj, kRunSpin);
-  const L3 wi{spin_i.c0, spin_i.c1, spin_i.c2}, wj{spin_j.c0, spin_j.c1, spin_j.c2};
+  const L3 sv{np.x + n.x, np.y + n.y, np.z + n.z};
+  const Lane k = 1.0 / (1.0 + c);
+  auto tilt = [&](L3& v) {
+    const Lane t = k * lane_dot(v, sv);
+    v = {v.x - t * sv.x, v.y - t * sv.y, v.z - t * sv.z};
+  };
+  tilt(ft);
+  tilt(mt);
+  // Spin about n; beyond the series (never in practice) the scalar path takes it.
+  const L3 &wi = q.wi, &wj = q.wj;
   const L3 ws{wi.x + wj.x, wi.y + wj.y, wi.z + wj.z};
   const Lane phi = 0.5 * lane_dot(ws, n) * dt;
-  if (lane_any(lane_abs(phi) >= 1e-2)) return false;  // beyond the series (never in practice)
-  const LaneMask spin = phi != 0.0;
-  if (lane_any(spin)) {
-    const bool all = lane_all(spin);
-    const Lane p2 = phi * phi;
-    constexpr double k6 = 1.0 / 6.0, k20 = 1.0 / 20.0, k42 = 1.0 / 42.0;
-    constexpr double k12 = 1.0 / 12.0, k30 = 1.0 / 30.0;
-    const Lane s = phi * (1.0 - p2 * k6 * (1.0 - p2 * k20 * (1.0 - p2 * k42)));
-    const Lane cs = 1.0 - 0.5 * p2 * (1.0 - p2 * k12 * (1.0 - p2 * k30));
-    auto turn = [&](L3& v) {
-      const L3 nxv = lane_cross(n, v);
-      const L3 r{cs * v.x + s * nxv.x, cs * v.y + s * nxv.y, cs * v.z + s * nxv.z};
-      v = all ? r : lane_select(spin, r, v);
-    };
-    turn(ft);
-    turn(mt);
-  }
-  const L4 vel_i = load_motion(mo, bi, kRunVel), vel_j = load_motion(mo, bj, kRunVel);
-  const L3 vi{vel_i.c0, vel_i.c1, vel_i.c2}, vj{vel_j.c0, vel_j.c1, vel_j.c2};
-  const Lane ri = pi.c3, rj = pj.c3;
-  const Lane half_gap = 0.5 * (dist - ri - rj);
-  const Lane ai = ri + half_gap, aj = rj + half_gap;
-  const L3 lever{ai * wi.x + aj * wj.x, ai * wi.y + aj * wj.y, ai * wi.z + aj * wj.z};
-  const L3 lxn = lane_cross(lever, n);
-  const L3 v_rel{(vj.x - vi.x) - lxn.x, (vj.y - vi.y) - lxn.y, (vj.z - vi.z) - lxn.z};
+  const LaneMask odd = (c <= -0.5) | (lane_abs(phi) >= 1e-2);
+  const Lane p2 = phi * phi;
+  constexpr double k6 = 1.0 / 6.0, k20 = 1.0 / 20.0, k42 = 1.0 / 42.0;
+  constexpr double k12 = 1.0 / 12.0, k30 = 1.0 / 30.0;
+  const Lane s = phi * (1.0 - p2 * k6 * (1.0 - p2 * k20 * (1.0 - p2 * k42)));
+  const Lane cs = 1.0 - 0.5 * p2 * (1.0 - p2 * k12 * (1.0 - p2 * k30));
+  auto spin = [&](L3& v) {
+    const L3 nxv = lane_cross(n, v);
+    v = {cs * v.x + s * nxv.x, cs * v.y + s * nxv.y, cs * v.z + s * nxv.z};
+  };
+  spin(ft);
+  spin(mt);
+  const L3& v_rel = q.v_rel;
   const L3 w_rel{wj.x - wi.x, wj.y - wi.y, wj.z - wi.z};
   const L4 run_k = load_run(g, kRunStiff);
   const Lane rad = run_b.c3, kn = run_k.c0, kt = run_k.c1;
@@ -406,25 +452,41 @@ PELLETDEM_INLINE bool update_bond_group(Bond* const* g, const PosRad* xr, const 
   const Lane ftn = lane_dot(ft, n), mtn = lane_dot(mt, n);
   ft = {ft.x - ftn * n.x, ft.y - ftn * n.y, ft.z - ftn * n.z};
   mt = {mt.x - mtn * n.x, mt.y - mtn * n.y, mt.z - mtn * n.z};
-  // Strength bounds of update_bond; a group with a bond past them is redone bond by bond.
+  // Strength bounds of bond_one; a group with a bond past them is redone bond by bond.
   const Lane sc = run_k.c2, tc = run_k.c3;
-  const Lane left = 1.0 - gather([&](int k) { return g[k]->damage; });
+  // Capacity left: 1 - damage, exactly 1 where no bond softens (`damage` false).
+  const Lane left = damage ? 1.0 - gather([&](int k) { return g[k]->damage; }) : Lane{} + 1.0;
   const Lane fs = left * sc * area, ts = left * tc * area;
   // The bounds times r_b (r_b > 0), which spares a division. This only picks the path: a group
-  // within rounding of a bound is redone by update_bond, whose own test then decides.
+  // within rounding of a bound is redone by bond_one, whose own test then decides.
   const Lane sig_bound = -fn * rad + 4.0 * ((lane_abs(mt.x) + lane_abs(mt.y)) + lane_abs(mt.z));
   const Lane tau_bound = ((lane_abs(ft.x) + lane_abs(ft.y)) + lane_abs(ft.z)) * rad + 2.0 * lane_abs(mn);
-  if (lane_any((sig_bound > fs * rad) | (tau_bound > ts * rad))) return false;
+  if (lane_any(odd | (sig_bound > fs * rad) | (tau_bound > ts * rad))) return false;
 
-  const L3 f{fn * n.x + ft.x, fn * n.y + ft.y, fn * n.z + ft.z};
+  f = {fn * n.x + ft.x, fn * n.y + ft.y, fn * n.z + ft.z};
   const L3 mom{mn * n.x + mt.x, mn * n.y + mt.y, mn * n.z + mt.z};
   const L3 nxft = lane_cross(n, ft);
-  const Lane mai = -ai, maj = -aj;
-  const L3 ti{mai * nxft.x - mom.x, mai * nxft.y - mom.y, mai * nxft.z - mom.z};
-  const L3 tj{maj * nxft.x + mom.x, maj * nxft.y + mom.y, maj * nxft.z + mom.z};
+  const Lane mai = -q.ai, maj = -q.aj;
+  ti = {mai * nxft.x - mom.x, mai * nxft.y - mom.y, mai * nxft.z - mom.z};
+  tj = {maj * nxft.x + mom.x, maj * nxft.y + mom.y, maj * nxft.z + mom.z};
   store_run(g, kRunNormal, n.x, n.y, n.z, fn);
   store_run(g, kRunShear, ft.x, ft.y, ft.z, mn);
   store_run(g, kRunBend, mt.x, mt.y, mt.z, rad);  // the radius goes back unchanged
+  return true;
+}
+
+// update_bond on kLanes intact bonds whose pairs are not in the neighbour list, in bond order.
+// Returns false, having changed nothing, when a bond needs the scalar path.
+PELLETDEM_INLINE bool update_bond_group(Bond* const* g, const PosRad* xr, const Motion* mo,
+                                        double dt, bool damage, Load* A) {
+  Index bi[kLanes], bj[kLanes];
+  for (int k = 0; k < kLanes; ++k) {
+    bi[k] = g[k]->i;
+    bj[k] = g[k]->j;
+  }
+  const PairLanes q = pair_lanes(bi, bj, xr, mo);
+  L3 f, ti, tj;
+  if (!bond_lanes(g, q, dt, damage, f, ti, tj)) return false;
   add_loads(A, bi, bj, f, ti, tj);
   return true;
 }
@@ -441,77 +503,87 @@ struct PairStats {
 
 namespace {
 
+// The contact force of eq. 5-10 of the touching pair (i, j) with kinematics g and history h;
+// the pair counts in the loop's statistics.
+PELLETDEM_INLINE ContactForce contact_force(Index i, Index j, ContactHistory& h, const PairGeometry& g,
+                                            const Particles& p, const HystereticLaw& law,
+                                            const ContactLawParams& cp, double dt_inc, double adh,
+                                            PairStats& out) {
+  const double ri = p.r[i], rj = p.r[j];
+  const double vn = g.v_rel.dot(g.n);
+  ContactKinematics c{g.delta, vn, g.v_rel - vn * g.n, g.n, ri * rj / (ri + rj),
+                      p.m[i] * p.m[j] / (p.m[i] + p.m[j])};
+  const ContactForce cf = law.evaluate(c, h, dt_inc, cp.mu, adh);
+  ++out.contacts;
+  const double ov = g.delta / std::min(ri, rj);
+  if (ov > out.max_ov) {
+    out.max_ov = ov;
+    out.max_ov_i = static_cast<Index>(ri <= rj ? i : j);
+  }
+  return cf;
+}
+
 // One touching pair (i, j) with its history h: the contact force of eq. 5-11 added to A.
 PELLETDEM_INLINE void contact_one(Index i, Index j, ContactHistory& h, const Particles& p,
                                   const HystereticLaw& law, const ContactLawParams& cp, double dt_inc,
                                   double adh, const Motion* mo, Load* A, PairStats& out) {
-  const double ri = p.r[i];
-  const Vec3 d = p.x[j] - p.x[i];
-  const double rsum = ri + p.r[j];
-  const double dist = std::sqrt(d.squaredNorm());
-  const double delta = rsum - dist;
-  const Vec3 nv = d * (1.0 / dist);
-  const double ai = ri - 0.5 * delta, aj = p.r[j] - 0.5 * delta;
-  const Vec3 wi = mo[i].w(), wj = mo[j].w();
-  const Vec3 v_rel = mo[j].v() - mo[i].v() - (ai * wi + aj * wj).cross(nv);
-  const double vn = v_rel.dot(nv);
-  ContactKinematics c{delta, vn, v_rel - vn * nv, nv, ri * p.r[j] / rsum,
-                      p.m[i] * p.m[j] / (p.m[i] + p.m[j])};
-  const ContactForce cf = law.evaluate(c, h, dt_inc, cp.mu, adh);
-  const Vec3 fj = cf.fn * nv + cf.ft;
+  const PairGeometry g = pair_geometry(i, j, p, mo);
+  const ContactForce cf = contact_force(i, j, h, g, p, law, cp, dt_inc, adh, out);
+  const Vec3 fj = cf.fn * g.n + cf.ft;
   A[j].f += fj;
   A[i].f -= fj;
-  const Vec3 nxft = nv.cross(cf.ft);
-  A[i].t += -ai * nxft;
-  A[i].roll += rolling_moment(cp.rolling, cf.fn, ri, mo[i].roll_cap);
-  A[j].t += -aj * nxft;
+  const Vec3 nxft = g.n.cross(cf.ft);
+  A[i].t += -g.ai * nxft;
+  A[i].roll += rolling_moment(cp.rolling, cf.fn, p.r[i], mo[i].roll_cap);
+  A[j].t += -g.aj * nxft;
   A[j].roll += rolling_moment(cp.rolling, cf.fn, p.r[j], mo[j].roll_cap);
-  ++out.contacts;
-  const double ov = delta / std::min(ri, p.r[j]);
-  if (ov > out.max_ov) {
-    out.max_ov = ov;
-    out.max_ov_i = static_cast<Index>(ri <= p.r[j] ? i : j);
+}
+
+// A touching bonded pair (i, j): its contact force and its bond b, added to A together.
+// Returns true when the bond broke (its share is then left out).
+PELLETDEM_INLINE bool bonded_one(Index i, Index j, ContactHistory& h, Bond& b, const Particles& p,
+                                 const HystereticLaw& law, const ContactLawParams& cp,
+                                 double dt_inc, double adh, const Motion* mo, Load* A,
+                                 PairStats& out) {
+  const PairGeometry g = pair_geometry(i, j, p, mo);
+  const ContactForce cf = contact_force(i, j, h, g, p, law, cp, dt_inc, adh, out);
+  Vec3 f = cf.fn * g.n + cf.ft;
+  const Vec3 nxft = g.n.cross(cf.ft);
+  Vec3 ti = -g.ai * nxft, tj = -g.aj * nxft;
+  Vec3 fb, tib, tjb;
+  const bool broke = bond_one(b, g, dt_inc, fb, tib, tjb);
+  if (!broke) {
+    f += fb;
+    ti += tib;
+    tj += tjb;
   }
+  A[j].f += f;
+  A[i].f -= f;
+  A[i].t += ti;
+  A[i].roll += rolling_moment(cp.rolling, cf.fn, p.r[i], mo[i].roll_cap);
+  A[j].t += tj;
+  A[j].roll += rolling_moment(cp.rolling, cf.fn, p.r[j], mo[j].roll_cap);
+  return broke;
 }
 
 #ifdef PELLETDEM_LANES
-// Four touching pairs, one per lane: contact_one's operations in the same order (Eigen's
-// expressions written out component by component), with its branches as selects, for the law
-// without its optional effects (HystereticLaw::plain_pairs; k_2 is then constant and the
-// stiffness scale 1). The forces are added pair by pair in order, so the bits are contact_one's.
-PELLETDEM_INLINE void contact_group(const Index* gi, const Index* gj, ContactHistory* const* gh,
-                                    const PosRad* xr, const Motion* mo, const HystereticLaw& law,
-                                    const ContactLawParams& cp, double dt_inc, double adh,
-                                    Load* A, PairStats& out) {
-  static_assert(sizeof(ContactHistory) == 4 * sizeof(double) && offsetof(ContactHistory, ft) == 8,
-                "ContactHistory is (delta0, ft) as four doubles");
-  const L4 pi = load_posrad(xr, gi), pj = load_posrad(xr, gj);
-  const Lane ri = pi.c3, rj = pj.c3;
-  const L3 d{pj.c0 - pi.c0, pj.c1 - pi.c1, pj.c2 - pi.c2};
-  const Lane rsum = ri + rj;
-  const Lane dist2 = lane_dot(d, d);
-  Lane dist;
-  for (int k = 0; k < kLanes; ++k) dist[k] = std::sqrt(dist2[k]);
-  const Lane delta = rsum - dist;
-  const Lane inv_dist = 1.0 / dist;
-  const L3 nv{d.x * inv_dist, d.y * inv_dist, d.z * inv_dist};
-  const Lane ai = ri - 0.5 * delta, aj = rj - 0.5 * delta;
-  const L4 spin_i = load_motion(mo, gi, kRunSpin), spin_j = load_motion(mo, gj, kRunSpin);
-  const L3 wi{spin_i.c0, spin_i.c1, spin_i.c2}, wj{spin_j.c0, spin_j.c1, spin_j.c2};
-  const L3 lever{ai * wi.x + aj * wj.x, ai * wi.y + aj * wj.y, ai * wi.z + aj * wj.z};
-  const L3 lxn = lane_cross(lever, nv);
-  const L4 vel_i = load_motion(mo, gi, kRunVel), vel_j = load_motion(mo, gj, kRunVel);
-  const L3 vi{vel_i.c0, vel_i.c1, vel_i.c2}, vj{vel_j.c0, vel_j.c1, vel_j.c2};
-  const L3 v_rel{(vj.x - vi.x) - lxn.x, (vj.y - vi.y) - lxn.y, (vj.z - vi.z) - lxn.z};
-  const Lane vn = lane_dot(v_rel, nv);
-  const L3 vt{v_rel.x - vn * nv.x, v_rel.y - vn * nv.y, v_rel.z - vn * nv.z};
-  const Lane mi = vel_i.c3, mj = vel_j.c3;
-  const Lane m_eff = mi * mj / (mi + mj);
+// Eq. 5 and 9-10 on four pairs q with histories hist, one per lane: contact_force's operations
+// in the same order (Eigen's expressions written out component by component), with its
+// branches as selects, for the law without its optional effects (HystereticLaw::plain_pairs;
+// k_2 is then constant and the stiffness scale 1). Out: the normal force fn, the tangential
+// force ft and the new history (delta0, hft).
+PELLETDEM_INLINE void contact_law_lanes(const PairLanes& q, const L4& hist, const HystereticLaw& law,
+                                        const ContactLawParams& cp, double dt_inc, double adh,
+                                        Lane& fn, L3& ft, Lane& delta0, L3& hft) {
+  const L3& nv = q.n;
+  const Lane delta = q.delta;
+  const Lane vn = lane_dot(q.v_rel, nv);
+  const L3 vt{q.v_rel.x - vn * nv.x, q.v_rel.y - vn * nv.y, q.v_rel.z - vn * nv.z};
+  const Lane m_eff = q.mi * q.mj / (q.mi + q.mj);
 
   // Eq. 5 (HystereticLaw::normal_force with scale 1 and constant k2).
-  const L4 hist = load_run(gh, 0);
-  Lane delta0 = hist.c0;
-  L3 hft{hist.c1, hist.c2, hist.c3};
+  delta0 = hist.c0;
+  hft = {hist.c1, hist.c2, hist.c3};
   const ContactLawParams& lp = law.params();
   const double s = 1.0;
   const double k1 = s * lp.k1, k2 = s * lp.k2, kc = s * lp.kc * adh;
@@ -520,7 +592,7 @@ PELLETDEM_INLINE void contact_group(const Index* gi, const Index* gj, ContactHis
   const Lane f_load = lane_select(kHuge < kd, Lane{} + kHuge, kd);  // std::min(k1 delta, kHuge)
   const LaneMask loading = f_elastic >= f_load;
   const LaneMask sticking = ~loading & (f_elastic <= -kc * delta);
-  const Lane fn = lane_select(loading, f_load, lane_select(sticking, -kc * delta, f_elastic));
+  fn = lane_select(loading, f_load, lane_select(sticking, -kc * delta, f_elastic));
   delta0 = lane_select(loading, delta - f_load * (1.0 / k2),
                        lane_select(sticking, delta * (1.0 + kc / k2), delta0));
 
@@ -532,16 +604,16 @@ PELLETDEM_INLINE void contact_group(const Index* gi, const Index* gj, ContactHis
   const Lane new2 = lane_dot(hft, hft);
   const LaneMask keep = new2 > 0.0;
   const Lane ratio = old2 / lane_select(keep, new2, Lane{} + 1.0);
-  Lane q;
-  for (int k = 0; k < kLanes; ++k) q[k] = std::sqrt(ratio[k]);
-  hft = lane_select(keep, L3{hft.x * q, hft.y * q, hft.z * q}, hft);
+  Lane r_keep;
+  for (int k = 0; k < kLanes; ++k) r_keep[k] = std::sqrt(ratio[k]);
+  hft = lane_select(keep, L3{hft.x * r_keep, hft.y * r_keep, hft.z * r_keep}, hft);
   const double ktdt = kt * dt_inc;
   hft = {hft.x - ktdt * vt.x, hft.y - ktdt * vt.y, hft.z - ktdt * vt.z};
   const Lane mk = m_eff * kt;
   Lane root;
   for (int k = 0; k < kLanes; ++k) root[k] = std::sqrt(mk[k]);
   const Lane gamma_t = law.damping_factor() * root;
-  L3 ft{hft.x - gamma_t * vt.x, hft.y - gamma_t * vt.y, hft.z - gamma_t * vt.z};
+  ft = {hft.x - gamma_t * vt.x, hft.y - gamma_t * vt.y, hft.z - gamma_t * vt.z};
   const Lane limit = cp.mu * lane_select(fn < 0.0, Lane{}, fn);  // mu std::max(fn, 0)
   const Lane ft2 = lane_dot(ft, ft);
   const LaneMask slide = ft2 > limit * limit;
@@ -554,22 +626,20 @@ PELLETDEM_INLINE void contact_group(const Index* gi, const Index* gj, ContactHis
     ft = lane_select(slide, capped, ft);
     hft = lane_select(slide, capped, hft);
   }
-  store_run(gh, 0, delta0, hft.x, hft.y, hft.z);
+}
 
-  const L3 fj{fn * nv.x + ft.x, fn * nv.y + ft.y, fn * nv.z + ft.z};
-  const L3 nxft = lane_cross(nv, ft);
-  const Lane mai = -ai, maj = -aj;
-  const L3 ti{mai * nxft.x, mai * nxft.y, mai * nxft.z}, tj{maj * nxft.x, maj * nxft.y, maj * nxft.z};
-  // Eq. 11 on each body (rolling_moment): zero where it does not apply.
-  auto roll = [&](Lane r, Lane cap) {
-    const LaneMask on = (cp.rolling > 0.0 ? ~LaneMask{} : LaneMask{}) & (fn > 0.0) & (cap != 0.0);
-    const Lane mfr = cp.rolling * fn * r;
-    return lane_select(on, lane_select(cap < mfr, cap, mfr), Lane{});
-  };
-  add_loads(A, gi, gj, fj, ti, tj, roll(ri, spin_i.c3), roll(rj, spin_j.c3));
-  out.contacts += kLanes;
-  // The largest delta / min(r_i, r_j): the division only for a group that may hold a new
-  // one (the bound is below max_ov by far more than the rounding, so none is missed).
+// Eq. 11's moment on each body of four contacts (rolling_moment): zero where it does not apply.
+PELLETDEM_INLINE Lane roll_lanes(const ContactLawParams& cp, Lane fn, Lane r, Lane cap) {
+  const LaneMask on = (cp.rolling > 0.0 ? ~LaneMask{} : LaneMask{}) & (fn > 0.0) & (cap != 0.0);
+  const Lane mfr = cp.rolling * fn * r;
+  return lane_select(on, lane_select(cap < mfr, cap, mfr), Lane{});
+}
+
+// The largest delta / min(r_i, r_j) into out, as contact_force keeps it: the division only for
+// a group that may hold a new one (the bound is below max_ov by far more than the rounding, so
+// none is missed).
+PELLETDEM_INLINE void note_overlap(PairStats& out, Lane delta, Lane ri, Lane rj, const Index* gi,
+                                   const Index* gj) {
   const Lane r_min = lane_select(rj < ri, rj, ri);
   if (lane_any(delta > (out.max_ov * (1.0 - 1e-12)) * r_min)) {
     const Lane ov = delta / r_min;
@@ -580,119 +650,271 @@ PELLETDEM_INLINE void contact_group(const Index* gi, const Index* gj, ContactHis
       }
   }
 }
+
+// Four touching pairs, one per lane, as contact_one (for HystereticLaw::plain_pairs). The
+// forces are added pair by pair in order, so the bits are contact_one's.
+PELLETDEM_INLINE void contact_group(const Index* gi, const Index* gj, ContactHistory* const* gh,
+                                    const PosRad* xr, const Motion* mo, const HystereticLaw& law,
+                                    const ContactLawParams& cp, double dt_inc, double adh,
+                                    Load* A, PairStats& out) {
+  static_assert(sizeof(ContactHistory) == 4 * sizeof(double) && offsetof(ContactHistory, ft) == 8,
+                "ContactHistory is (delta0, ft) as four doubles");
+  const PairLanes q = pair_lanes(gi, gj, xr, mo);
+  const L4 hist = load_run(gh, 0);
+  Lane fn, delta0;
+  L3 ft, hft;
+  contact_law_lanes(q, hist, law, cp, dt_inc, adh, fn, ft, delta0, hft);
+  store_run(gh, 0, delta0, hft.x, hft.y, hft.z);
+  const L3& nv = q.n;
+  const L3 fj{fn * nv.x + ft.x, fn * nv.y + ft.y, fn * nv.z + ft.z};
+  const L3 nxft = lane_cross(nv, ft);
+  const Lane mai = -q.ai, maj = -q.aj;
+  const L3 ti{mai * nxft.x, mai * nxft.y, mai * nxft.z}, tj{maj * nxft.x, maj * nxft.y, maj * nxft.z};
+  add_loads(A, gi, gj, fj, ti, tj, roll_lanes(cp, fn, q.ri, q.cap_i), roll_lanes(cp, fn, q.rj, q.cap_j));
+  out.contacts += kLanes;
+  note_overlap(out, q.delta, q.ri, q.rj, gi, gj);
+}
+
+// Four touching bonded pairs, one per lane, as bonded_one: the contact and the bond share the
+// pair's kinematics and one load and store per particle. Returns false, having changed
+// nothing, when a bond needs the scalar path.
+PELLETDEM_INLINE bool bonded_group(const Index* gi, const Index* gj, ContactHistory* const* gh,
+                                   Bond* const* gb, const PosRad* xr, const Motion* mo,
+                                   const HystereticLaw& law, const ContactLawParams& cp,
+                                   double dt_inc, double adh, bool damage, Load* A,
+                                   PairStats& out) {
+  const PairLanes q = pair_lanes(gi, gj, xr, mo);
+  L3 fb, tib, tjb;
+  if (!bond_lanes(gb, q, dt_inc, damage, fb, tib, tjb)) return false;
+  const L4 hist = load_run(gh, 0);
+  Lane fn, delta0;
+  L3 ft, hft;
+  contact_law_lanes(q, hist, law, cp, dt_inc, adh, fn, ft, delta0, hft);
+  store_run(gh, 0, delta0, hft.x, hft.y, hft.z);
+  const L3& nv = q.n;
+  const L3 f{(fn * nv.x + ft.x) + fb.x, (fn * nv.y + ft.y) + fb.y, (fn * nv.z + ft.z) + fb.z};
+  const L3 nxft = lane_cross(nv, ft);
+  const Lane mai = -q.ai, maj = -q.aj;
+  const L3 ti{mai * nxft.x + tib.x, mai * nxft.y + tib.y, mai * nxft.z + tib.z};
+  const L3 tj{maj * nxft.x + tjb.x, maj * nxft.y + tjb.y, maj * nxft.z + tjb.z};
+  add_loads(A, gi, gj, f, ti, tj, roll_lanes(cp, fn, q.ri, q.cap_i), roll_lanes(cp, fn, q.rj, q.cap_j));
+  out.contacts += kLanes;
+  note_overlap(out, q.delta, q.ri, q.rj, gi, gj);
+  return true;
+}
 #endif
 
 }  // namespace
 
+// The bonded pairs of the neighbour list (NeighborList::kLiveBonded in `live`): the bonds,
+// the bond of each pair (read only where that bit is set), and where a thread notes the bonds
+// that broke. bonds == nullptr: the world has no bonds. damage: some bond may be softening
+// (BondParams::softening), so its capacity is below its strength.
+struct BondedPairs {
+  Bond* bonds = nullptr;
+  const Index* bond_of = nullptr;
+  std::vector<long>* broke = nullptr;
+  bool damage = false;
+};
+
+namespace {
+
 // The pair loop over particles [lo, hi), i.e. over their listed pairs [start[lo], start[hi]):
-// the contact force of every pair that touches (eq. 5-11), added to A; the history of
-// pairs that came apart is cleared. The touch test runs four pairs at a time on the packed
-// positions and radii (one aligned load per particle); touching pairs go four at a time through
-// contact_group where the law allows (the rest through contact_one), in pair order either way,
-// so the forces add up in the same order as one pair at a time. Copies for AVX2 and x86-64-v4
-// as the bond loop has.
-#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && defined(__linux__)
-__attribute__((target_clones("arch=x86-64-v4", "avx2", "default")))
-#endif
-PairStats pair_loop(long lo, long hi, const Particles& p, const PosRad* xr, NeighborList& nbr,
-                    const HystereticLaw& law, const ContactLawParams& cp, double dt_inc, double adh,
-                    const Motion* mo, Load* A, bool vector_kernel) {
+// the contact force of every pair that touches (eq. 5-11) and, with kBonded, the bond of every
+// bonded pair whether it touches or not, added to A; the history of pairs that came apart is
+// cleared. The touch test runs four pairs at a time on the packed positions and radii (one
+// aligned load per particle). Pairs queue up by kind and leave four at a time: touching
+// unbonded pairs through contact_group where the law allows (else contact_one), touching bonded
+// pairs through bonded_group (else bonded_one), which shares the pair's kinematics and its one
+// load and store per particle between the contact and the bond, and bonded pairs that do not
+// touch through update_bond_group (else update_bond). The scalar kernels take the pairs in the
+// same order as the lanes, so the forces add up in the same order either way.
+template <bool kBonded>
+PELLETDEM_INLINE PairStats pair_loop_body(long lo, long hi, const Particles& p, const PosRad* xr,
+                                          NeighborList& nbr, const HystereticLaw& law,
+                                          const ContactLawParams& cp, double dt_inc, double adh,
+                                          const Motion* mo, Load* A, bool vector_kernel,
+                                          const BondedPairs& bp) {
   PairStats out;
   const Index k0 = nbr.start[lo], k1 = nbr.start[hi];
   const Index* I = nbr.first.data();
   const Index* J = nbr.j.data();
   ContactHistory* H = nbr.history.data();
   std::uint8_t* live = nbr.live.data();
+  constexpr std::uint8_t kTouch = NeighborList::kLiveTouch, kBond = NeighborList::kLiveBonded;
   // The test written out as the four-lane one does it, so both paths see the same pairs touch.
   auto touching = [&](Index k) {
     const PosRad &a = xr[I[k]], &b = xr[J[k]];
     const double dx = b.x - a.x, dy = b.y - a.y, dz = b.z - a.z, rsum = a.r + b.r;
     return (dx * dx + dy * dy) + dz * dz < rsum * rsum;
   };
-  // A pair that came apart loses its history (it touched at the last pass: `live`).
+  // A pair that came apart loses its history (it touched at the last pass).
   auto settle = [&](Index k, bool on) {
-    if (!on && live[k]) H[k] = ContactHistory{};
-    live[k] = on;
+    if (!on && (live[k] & kTouch)) H[k] = ContactHistory{};
+    live[k] = static_cast<std::uint8_t>(on | (live[k] & kBond));
   };
   auto one = [&](Index k) {
     contact_one(I[k], J[k], H[k], p, law, cp, dt_inc, adh, mo, A, out);
   };
+  // A bonded pair, touching or not; a bond that broke is noted and its pair is no longer bonded.
+  auto bonded = [&](Index k, bool on) {
+    const Index b = bp.bond_of[k];
+    const bool broke = on ? bonded_one(I[k], J[k], H[k], bp.bonds[b], p, law, cp, dt_inc, adh, mo, A, out)
+                          : update_bond(bp.bonds[b], p, mo, dt_inc, A);
+    if (broke) {
+      bp.broke->push_back(b);
+      live[k] &= static_cast<std::uint8_t>(~kBond);
+    }
+  };
 #ifdef PELLETDEM_LANES
-  if (vector_kernel && law.plain_pairs()) {
-    // Touching pairs queue up in `buf` (the test appends without a branch) and leave it four
-    // at a time. contact_group is written out at one place only: inlined at several, the loop
-    // outgrew the instruction cache and ran at half speed.
-    Index buf[2 * kLanes];
-    int nb = 0;
+  const bool lanes = vector_kernel && law.plain_pairs();
+  if (kBonded || lanes) {
+    // Queues: touching unbonded pairs (q[0]), touching bonded (q[1]), bonded apart (q[2]).
+    // The test appends without a branch. Each group kernel is written out at one place:
+    // inlined at several, the loop outgrew the instruction cache and ran at half speed.
+    constexpr int kQueues = kBonded ? 3 : 1;
+    Index q[kQueues][2 * kLanes];
+    int nq[kQueues] = {};
     Index k = k0;
+    // A queue is full from kLanes entries on, and holds fewer than 2 kLanes.
+    static_assert((kLanes & (kLanes - 1)) == 0, "kLanes is a power of two");
+    auto full = [&] {
+      int any = 0;
+      for (int c = 0; c < kQueues; ++c) any |= nq[c];
+      return (any & kLanes) != 0;
+    };
+    // Pairs k + l for the lanes l set in mask m to the end of queue c: one 16-byte store.
+    static_assert(sizeof(Index) == sizeof(std::uint32_t), "queue entries are 32-bit");
+    auto append = [&](int c, unsigned m) {
+      LaneOffsets v;
+      std::memcpy(&v, kLaneList.offset[m], sizeof v);
+      v += static_cast<std::uint32_t>(k);
+      std::memcpy(q[c] + nq[c], &v, sizeof v);
+      nq[c] += kLaneList.count[m];
+    };
     for (;;) {
-      while (nb < kLanes && k < k1) {
+      while (!full() && k < k1) {
         if (k + kLanes <= k1) {
           const L4 a = load_posrad(xr, I + k), b = load_posrad(xr, J + k);
           const Lane dx = b.c0 - a.c0, dy = b.c1 - a.c1, dz = b.c2 - a.c2, rsum = a.c3 + b.c3;
           const LaneMask on = (dx * dx + dy * dy) + dz * dz < rsum * rsum;
-          std::uint32_t on_bytes = 0;  // lane l's touch in byte l, as `live` holds it
-          for (int l = 0; l < kLanes; ++l) {
-            buf[nb] = k + l;
-            const int t = static_cast<int>(on[l] & 1);
-            nb += t;
-            on_bytes |= static_cast<std::uint32_t>(t) << (8 * l);
+          std::uint32_t was;  // lane l's `live` in byte l
+          std::memcpy(&was, live + k, sizeof was);
+          // Lane l's touch in bit l, and in bit 0 of byte l (multiplying spreads the four bits
+          // to the four bytes without carries).
+          const unsigned touch = static_cast<unsigned>((on[0] & 1) | (on[1] & 2) | (on[2] & 4) | (on[3] & 8));
+          const std::uint32_t on_bytes = (touch * 0x00204081u) & 0x01010101u;
+          if constexpr (kBonded) {
+            // Bit 1 of byte l to bit l (the multiply gathers the bytes' bits into the top byte).
+            const unsigned bond = (((was >> 1) & 0x01010101u) * 0x01020408u) >> 24;
+            append(0, touch & ~bond);
+            append(1, touch & bond);
+            append(2, ~touch & bond & 0xFu);
+          } else {
+            append(0, touch);
           }
           // Pairs that came apart are rare in a step: one test for the four, no branch per
           // pair (a branch on each pair's touch was mispredicted often enough to cost ~6 %).
-          std::uint32_t was;
-          std::memcpy(&was, live + k, sizeof was);
-          const std::uint32_t gone = was & ~on_bytes;  // touched last pass, not now
+          constexpr std::uint32_t kTouchBytes = 0x01010101u * kTouch, kBondBytes = 0x01010101u * kBond;
+          const std::uint32_t gone = was & ~on_bytes & kTouchBytes;  // touched last pass, not now
           if (gone)
             for (int l = 0; l < kLanes; ++l)
               if (gone >> (8 * l) & 1u) H[k + l] = ContactHistory{};
-          std::memcpy(live + k, &on_bytes, sizeof on_bytes);
+          const std::uint32_t now = on_bytes | (was & kBondBytes);
+          std::memcpy(live + k, &now, sizeof now);
           k += kLanes;
         } else {
           const bool on = touching(k);
-          buf[nb] = k;
-          nb += on;
+          const int c = (kBonded && (live[k] & kBond)) ? (on ? 1 : 2) : 0;
+          q[c][nq[c]] = k;
+          nq[c] += (c > 0 || on);
           settle(k, on);
           ++k;
         }
       }
-      if (nb < kLanes) break;
+      int c = 0;
+      while (c < kQueues && nq[c] < kLanes) ++c;
+      if (c == kQueues) break;
+      const Index* e = q[c];
       Index gi[kLanes], gj[kLanes];
       ContactHistory* gh[kLanes];
+      Bond* gb[kLanes];
       for (int l = 0; l < kLanes; ++l) {
-        gi[l] = I[buf[l]];
-        gj[l] = J[buf[l]];
-        gh[l] = H + buf[l];
+        gi[l] = I[e[l]];
+        gj[l] = J[e[l]];
+        gh[l] = H + e[l];
+        if (kBonded && c > 0) gb[l] = bp.bonds + bp.bond_of[e[l]];
       }
-      contact_group(gi, gj, gh, xr, mo, law, cp, dt_inc, adh, A, out);
-      for (int l = kLanes; l < nb; ++l) buf[l - kLanes] = buf[l];
-      nb -= kLanes;
+      if (c == 0) {
+        if (lanes) contact_group(gi, gj, gh, xr, mo, law, cp, dt_inc, adh, A, out);
+        else for (int l = 0; l < kLanes; ++l) one(e[l]);
+      } else if (c == 1) {
+        if (!lanes || !bonded_group(gi, gj, gh, gb, xr, mo, law, cp, dt_inc, adh, bp.damage, A, out))
+          for (int l = 0; l < kLanes; ++l) bonded(e[l], true);
+      } else {
+        if (!vector_kernel || !update_bond_group(gb, xr, mo, dt_inc, bp.damage, A))
+          for (int l = 0; l < kLanes; ++l) bonded(e[l], false);
+      }
+      for (int l = kLanes; l < nq[c]; ++l) q[c][l - kLanes] = q[c][l];
+      nq[c] -= kLanes;
     }
-    for (int l = 0; l < nb; ++l) one(buf[l]);
+    for (int l = 0; l < nq[0]; ++l) one(q[0][l]);
+    for (int c = 1; c < kQueues; ++c)
+      for (int l = 0; l < nq[c]; ++l) bonded(q[c][l], c == 1);
     return out;
   }
 #endif
   (void)vector_kernel;
   for (Index k = k0; k < k1; ++k) {
     const bool on = touching(k);
-    if (on) one(k);
-    settle(k, on);
+    if (kBonded && (live[k] & kBond)) {
+      settle(k, on);
+      bonded(k, on);
+    } else {
+      if (on) one(k);
+      settle(k, on);
+    }
   }
   return out;
 }
 
-// The bond loop over bonds [lo, hi): intact bonds in groups of kLanes where the compiler has
-// vector extensions, the rest (and groups that need it) one by one, always in bond order so
-// the forces add up in the same order. Broken bonds' indices go to `broke`. On x86-64 Linux
-// with GCC a copy is chosen at load time: x86-64-v4 (AVX-512: its 32 vector registers hold a
-// group's values where AVX2's 16 spill to the stack), AVX2, or the baseline. The build has
-// -ffp-contract=off, so no copy fuses a multiply and an add: all three give the same bits.
+}  // namespace
+
+// The pair loop without bonds, and with them (pair_loop_body). Copies for AVX2 and x86-64-v4
+// as the bond loop has.
 #if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && defined(__linux__)
 __attribute__((target_clones("arch=x86-64-v4", "avx2", "default")))
 #endif
-void bond_loop(std::vector<Bond>& bonds, long lo, long hi, const Particles& p, const PosRad* xr,
-               const Motion* mo, double dt, Load* A, std::vector<long>& broke,
-               bool vector_kernel) {
+PairStats pair_loop_plain(long lo, long hi, const Particles& p, const PosRad* xr, NeighborList& nbr,
+                          const HystereticLaw& law, const ContactLawParams& cp, double dt_inc,
+                          double adh, const Motion* mo, Load* A, bool vector_kernel) {
+  return pair_loop_body<false>(lo, hi, p, xr, nbr, law, cp, dt_inc, adh, mo, A, vector_kernel,
+                               BondedPairs{});
+}
+
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && defined(__linux__)
+__attribute__((target_clones("arch=x86-64-v4", "avx2", "default")))
+#endif
+PairStats pair_loop_bonded(long lo, long hi, const Particles& p, const PosRad* xr, NeighborList& nbr,
+                           const HystereticLaw& law, const ContactLawParams& cp, double dt_inc,
+                           double adh, const Motion* mo, Load* A, bool vector_kernel,
+                           const BondedPairs& bp) {
+  return pair_loop_body<true>(lo, hi, p, xr, nbr, law, cp, dt_inc, adh, mo, A, vector_kernel, bp);
+}
+
+// The bond loop over bonds list[lo, hi) (bonds whose pairs are not in the neighbour list, in
+// bond order): intact bonds in groups of kLanes where the compiler has vector extensions, the
+// rest (and groups that need it) one by one, always in list order so the forces add up in the
+// same order. Broken bonds' indices go to `broke`. On x86-64 Linux with GCC a copy is chosen at
+// load time: x86-64-v4 (AVX-512: its 32 vector registers hold a group's values where AVX2's 16
+// spill to the stack), AVX2, or the baseline. The build has -ffp-contract=off, so no copy fuses
+// a multiply and an add: all three give the same bits.
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && defined(__linux__)
+__attribute__((target_clones("arch=x86-64-v4", "avx2", "default")))
+#endif
+void bond_loop(std::vector<Bond>& bonds, const Index* list, long lo, long hi, const Particles& p,
+               const PosRad* xr, const Motion* mo, double dt, bool damage, Load* A,
+               std::vector<long>& broke, bool vector_kernel) {
   auto one = [&](long b) {
     if (update_bond(bonds[b], p, mo, dt, A)) broke.push_back(b);
   };
@@ -700,7 +922,8 @@ void bond_loop(std::vector<Bond>& bonds, long lo, long hi, const Particles& p, c
   long idx[kLanes];
   Bond* g[kLanes];
   int m = 0;
-  for (long b = lo; b < hi; ++b) {
+  for (long e = lo; e < hi; ++e) {
+    const long b = list[e];
     if (bonds[b].mode != BondMode::Intact) continue;
     if (!vector_kernel) {
       one(b);
@@ -710,14 +933,14 @@ void bond_loop(std::vector<Bond>& bonds, long lo, long hi, const Particles& p, c
     g[m] = &bonds[b];
     if (++m < kLanes) continue;
     m = 0;
-    if (!update_bond_group(g, xr, mo, dt, A))
+    if (!update_bond_group(g, xr, mo, dt, damage, A))
       for (int k = 0; k < kLanes; ++k) one(idx[k]);
   }
   for (int k = 0; k < m; ++k) one(idx[k]);
 #else
   (void)vector_kernel, (void)xr, (void)mo;
-  for (long b = lo; b < hi; ++b)
-    if (bonds[b].mode == BondMode::Intact) one(b);
+  for (long e = lo; e < hi; ++e)
+    if (bonds[list[e]].mode == BondMode::Intact) one(list[e]);
 #endif
 }
 
@@ -749,7 +972,9 @@ void World::compute_forces(bool advance, Finish finish) {
   const double dt_inc = advance ? dt : 0.0;
   const double adh = adhesion_scale();
   const ContactLawParams& cp = law_.params();
-  const long nbonds = static_cast<long>(bonds_.size());
+  // Bonded pairs in the list go with the pair loop; the rest (orphans_) through bond_loop.
+  if (!bonds_.empty() && bond_map_generation_ != nbr_.generation) map_bonds();
+  const long n_orphans = static_cast<long>(orphans_.size());
   std::vector<long> contacts_t(nt, 0);
   std::vector<double> maxov_t(nt, 0.0);
   std::vector<Index> maxov_i_t(nt, 0);
@@ -772,9 +997,10 @@ void World::compute_forces(bool advance, Finish finish) {
     Load* A = loads_[tid].data();
     long lo = run[tid], hi = run[tid + 1];
     long blo = 0, bhi = 0;
-    if (nbonds > 0) static_share(nbonds, nt, tid, blo, bhi);
+    if (n_orphans > 0) static_share(n_orphans, nt, tid, blo, bhi);
     if (tid > 0) {
-      // Thread t's buffer holds its pairs' particles, its bonds' and the wall contacts of its
+      // Thread t's buffer holds its pairs' particles (bonded pairs among them), its orphan
+      // bonds' and the wall contacts of its
       // run: zeroing and summing only that range keeps the other core's half out of this
       // one's cache (zeroing all N and reading it back across cores cost ~10 % of a
       // two-thread step).
@@ -787,9 +1013,10 @@ void World::compute_forces(bool advance, Finish finish) {
       }
       rlo = std::min<long>(rlo, jmin);
       rhi = std::max<long>(rhi, static_cast<long>(jmax) + 1);
-      for (long b = blo; b < bhi; ++b) {
-        rlo = std::min<long>(rlo, std::min(bonds_[b].i, bonds_[b].j));
-        rhi = std::max<long>(rhi, std::max(bonds_[b].i, bonds_[b].j) + 1);
+      for (long e = blo; e < bhi; ++e) {
+        const Bond& b = bonds_[orphans_[e]];
+        rlo = std::min<long>(rlo, std::min(b.i, b.j));
+        rhi = std::max<long>(rhi, std::max(b.i, b.j) + 1);
       }
       if (rhi <= rlo) rlo = rhi = 0;
       load_range_[2 * tid] = rlo;
@@ -803,13 +1030,17 @@ void World::compute_forces(bool advance, Finish finish) {
                      spin_inv_.data());
 #pragma omp barrier
     }
-    const PairStats ps = pair_loop(lo, hi, p_, xr_.data(), nbr_, law_, cp, dt_inc, adh, mo_.data(),
-                                   A, vector_kernels_);
-    // A thread's bonds add to its own buffers, so it goes on to them without waiting for the
-    // others' pairs; the reduction below waits for all.
-    if (nbonds > 0)
-      bond_loop(bonds_, blo, bhi, p_, xr_.data(), mo_.data(), dt_inc, A, broke_t[tid],
-                vector_kernels_);
+    const PairStats ps =
+        bonds_.empty()
+            ? pair_loop_plain(lo, hi, p_, xr_.data(), nbr_, law_, cp, dt_inc, adh, mo_.data(), A,
+                              vector_kernels_)
+            : pair_loop_bonded(lo, hi, p_, xr_.data(), nbr_, law_, cp, dt_inc, adh, mo_.data(), A,
+                               vector_kernels_, BondedPairs{bonds_.data(), pair_bond_.data(), &broke_t[tid], bonds_soften_});
+    // A thread's orphan bonds add to its own buffers, so it goes on to them without waiting
+    // for the others' pairs; the reduction below waits for all.
+    if (n_orphans > 0)
+      bond_loop(bonds_, orphans_.data(), blo, bhi, p_, xr_.data(), mo_.data(), dt_inc,
+                bonds_soften_, A, broke_t[tid], vector_kernels_);
     // The wall contacts of this thread's run of particles go into its own buffer as well.
     if (tid < nt_walls) wall_share(tid, nt_walls, nt_walls == 1 ? 0 : lo, nt_walls == 1 ? n : hi, dt_inc, A);
 #pragma omp barrier

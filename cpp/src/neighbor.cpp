@@ -135,6 +135,7 @@ void NeighborList::build(const Particles& p, const Box& box, double skin, double
 }
 
 void NeighborList::mark_live() {
+  ++generation;
   live.resize(history.size());
   for (std::size_t k = 0; k < history.size(); ++k)
     live[k] = !history[k].blank();

@@ -20,6 +20,7 @@ WorldState World::save_state() const {
   s.forces_valid = forces_valid_;
   s.x = p_.x; s.v = p_.v; s.w = p_.w; s.f = p_.f; s.t = p_.t;
   s.r = p_.r; s.m = p_.m;
+  if (list_valid_) s.x_build = x_build_;
   for (std::size_t i = 0; i + 1 < nbr_.start.size(); ++i)
     for (Index k = nbr_.start[i]; k < nbr_.start[i + 1]; ++k) {
       const ContactHistory& h = nbr_.history[k];
@@ -78,6 +79,7 @@ void World::load_state(const WorldState& s) {
     walls_[k].load_wall = true;
   }
   bonds_ = s.bonds;
+  bond_map_generation_ = -1;
   // The bonds' increments were last taken at the saved step (a state dict does not carry it).
   broken_ = s.broken;
   time_ = s.time;
@@ -90,9 +92,21 @@ void World::load_state(const WorldState& s) {
   load_smoothing_ = s.load_smoothing;
   load_smoothed_ = s.load_smoothed;
   samples_.clear();
-  // A fresh list at the saved positions holds every pair in contact; give them their history.
+  // A list built where the saved one was (or, without those positions, at the saved ones: it
+  // then holds every pair in contact, but the bonded pairs' forces may add up in another
+  // order); the pairs in contact get their history.
   nbr_ = NeighborList{};
-  rebuild();
+  bool same_list = s.x_build.size() == n;
+  for (std::size_t k = 0; same_list && k < n; ++k)
+    same_list = s.x_build[k].allFinite() && params_.box.contains(s.x_build[k]);
+  if (same_list) {
+    std::vector<Vec3> x_now = s.x_build;
+    p_.x.swap(x_now);
+    rebuild();
+    p_.x.swap(x_now);
+  } else {
+    rebuild();
+  }
   for (std::size_t k = 0; k < s.ci.size(); ++k) {
     const Index i = s.ci[k], j = s.cj[k];
     const auto first = nbr_.j.begin() + nbr_.start[i], last = nbr_.j.begin() + nbr_.start[i + 1];
@@ -159,6 +173,7 @@ std::vector<Index> World::sort_particles() {
     for (std::size_t k = 0; k < n; ++k) a[k] = old[order[k]];
   };
   permute(s.x), permute(s.v), permute(s.w), permute(s.f), permute(s.t), permute(s.r), permute(s.m);
+  if (!s.x_build.empty()) permute(s.x_build);
   // A pair keeps i < j; where renumbering swaps its ends, the tangential spring, stored as the
   // force on the second body, changes sign.
   for (std::size_t k = 0; k < s.ci.size(); ++k) {

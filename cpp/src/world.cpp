@@ -614,7 +614,37 @@ long World::create_bonds(const BondParams& bp) {
       ++created;
     }
   forces_valid_ = false;
+  bond_map_generation_ = -1;
   return created;
+}
+
+void World::map_bonds() {
+  pair_bond_.assign(nbr_.pair_count(), 0);
+  orphans_.clear();
+  bonds_soften_ = false;
+  std::uint8_t* live = nbr_.live.data();
+  for (std::size_t k = 0; k < nbr_.pair_count(); ++k)
+    live[k] &= static_cast<std::uint8_t>(~NeighborList::kLiveBonded);
+  for (std::size_t b = 0; b < bonds_.size(); ++b) {
+    const Bond& bond = bonds_[b];
+    if (bond.mode != BondMode::Intact) continue;
+    if (bond.softening > 0.0 || bond.damage != 0.0) bonds_soften_ = true;
+    // The pair loop's normal points from the pair's first particle (the lower index) to its
+    // second, as a bond's does from i to j when i < j.
+    bool listed = false;
+    if (bond.i < bond.j) {
+      const auto first = nbr_.j.begin() + nbr_.start[bond.i], last = nbr_.j.begin() + nbr_.start[bond.i + 1];
+      const auto it = std::lower_bound(first, last, bond.j);
+      if (it != last && *it == bond.j) {
+        const std::size_t k = static_cast<std::size_t>(it - nbr_.j.begin());
+        live[k] |= NeighborList::kLiveBonded;
+        pair_bond_[k] = static_cast<Index>(b);
+        listed = true;
+      }
+    }
+    if (!listed) orphans_.push_back(static_cast<Index>(b));
+  }
+  bond_map_generation_ = nbr_.generation;
 }
 
 void World::clear_samples() {

@@ -26,10 +26,14 @@ class NeighborList {
   std::vector<Index> j;                  // second particle of each pair (j > i)
   std::vector<Index> first;              // first particle i of each pair, for flat pair loops
   std::vector<ContactHistory> history;   // per pair, survives rebuilds
-  // Per pair: 1 where the history may be non-zero (the pair touched at the last force pass).
-  // The pair loop clears the history of pairs that came apart; with this flag it reads one
-  // byte of a pair that does not touch instead of its 32-byte history, without a branch.
+  // Per pair, bit kLiveTouch: the history may be non-zero (the pair touched at the last force
+  // pass). The pair loop clears the history of pairs that came apart; with this flag it reads
+  // one byte of a pair that does not touch instead of its 32-byte history, without a branch.
+  // Bit kLiveBonded: the pair has an intact bond (set by World::map_bonds).
   std::vector<std::uint8_t> live;
+  static constexpr std::uint8_t kLiveTouch = 1, kLiveBonded = 2;
+  // Counts the builds and mark_live calls: whatever maps onto the pairs is stale when it changes.
+  long generation = 0;
 
   std::size_t pair_count() const { return j.size(); }
 

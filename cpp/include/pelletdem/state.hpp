@@ -19,6 +19,10 @@ struct WorldState {
   double load_smoothing = 1.0, load_smoothed = -std::numeric_limits<double>::infinity();
   bool forces_valid = false;
   std::vector<Vec3> x, v, w, f, t;
+  // Positions at the last neighbour-list build (empty: unknown). The restored world builds its
+  // list from them, so it holds the same pairs as the saved one, in which the bonded pairs'
+  // forces add up in the same order, and is rebuilt at the same steps.
+  std::vector<Vec3> x_build;
   std::vector<double> r, m;
   // Contacts whose history is not blank (pairs i < j).
   std::vector<Index> ci, cj;

@@ -213,6 +213,15 @@ class World {
   // Particles [lo, hi) whose Load records thread t > 0 zeroed and filled in the last force
   // pass, as (lo, hi) pairs per thread (thread 0's buffer covers every particle).
   std::vector<long> load_range_;
+  // Marks the neighbour-list pairs that have an intact bond (NeighborList::kLiveBonded, their
+  // bond in pair_bond_): the pair loop updates those bonds with their contacts. Intact bonds
+  // whose pair is not in the list go to orphans_. Done when the list changed since the last
+  // time (bond_map_generation_ != nbr_.generation).
+  void map_bonds();
+  std::vector<Index> pair_bond_;
+  std::vector<Index> orphans_;
+  long bond_map_generation_ = -1;
+  bool bonds_soften_ = false;  // some intact bond softens or is damaged (map_bonds)
   void move_walls();
   void rebuild();
   void build_wall_lists();
