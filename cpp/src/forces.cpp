@@ -23,10 +23,17 @@ PELLETDEM_INLINE double rolling_moment(double m_r, double fn, double r, double c
   return std::min(m_r * fn * r, cap);
 }
 
-// Sine and cosine of a step's twist angle: a short series for the tiny angles of a time step
-// (error < 1e-15 below 0.01 rad), the library functions otherwise.
+// Sine and cosine of a step's twist angle: short series for the tiny angles of a time step
+// (below 1e-3 rad to the last bit with two and three terms, the four-lane bond kernel's; below
+// 1e-2 rad with error < 1e-15), the library functions otherwise.
+constexpr double kShortSeries = 1e-3;
 PELLETDEM_INLINE void small_angle_sin_cos(double phi, double& s, double& c) {
-  if (std::abs(phi) < 1e-2) {
+  if (std::abs(phi) < kShortSeries) {
+    const double p2 = phi * phi;
+    constexpr double k6 = 1.0 / 6.0, k20 = 1.0 / 20.0, k12 = 1.0 / 12.0;
+    s = phi * (1.0 - p2 * k6 * (1.0 - p2 * k20));
+    c = 1.0 - 0.5 * p2 * (1.0 - p2 * k12);
+  } else if (std::abs(phi) < 1e-2) {
     const double p2 = phi * phi;
     constexpr double k6 = 1.0 / 6.0, k20 = 1.0 / 20.0, k42 = 1.0 / 42.0;
     constexpr double k12 = 1.0 / 12.0, k30 = 1.0 / 30.0;
@@ -61,6 +68,8 @@ struct PairGeometry {
   double ai, aj;  // lever arms from the centres to the contact point, m
   Vec3 wi, wj;    // spins, rad/s
   Vec3 v_rel;     // velocity of j relative to i at the contact point, m/s
+  double vn;      // its normal part v_rel . n, m/s
+  Vec3 vt;        // its tangential part, m/s
 };
 
 PELLETDEM_INLINE PairGeometry pair_geometry(Index i, Index j, const Particles& p, const Motion* mo) {
@@ -74,12 +83,33 @@ PELLETDEM_INLINE PairGeometry pair_geometry(Index i, Index j, const Particles& p
   g.wi = mo[i].w();
   g.wj = mo[j].w();
   g.v_rel = mo[j].v() - mo[i].v() - (g.ai * g.wi + g.aj * g.wj).cross(g.n);
+  g.vn = g.v_rel.dot(g.n);
+  g.vt = g.v_rel - g.vn * g.n;
   return g;
 }
 
-// Updates the bond's loads from the pair's kinematics g. Unless it broke (then it returns
-// true), f is its force on j and ti, tj its torques on i and j.
-PELLETDEM_INLINE bool bond_one(Bond& b, const PairGeometry& g, double dt, Vec3& f, Vec3& ti, Vec3& tj) {
+// A bond's loads on j: force fn n + ft and moment `moment` (the pair loop adds its contact's
+// force to fn and ft before it turns them into forces and torques).
+struct BondLoad {
+  double fn;
+  Vec3 ft, moment;
+};
+
+// Force fn n + ft on j and -(that) on i, with the torques of ft at the contact point (lever
+// arms ai, aj) and the moment on j (and -moment on i), added to A.
+PELLETDEM_INLINE void add_pair_load(Index i, Index j, const PairGeometry& g, double fn, const Vec3& ft,
+                                    const Vec3& moment, Load* A) {
+  const Vec3 f = fn * g.n + ft;
+  const Vec3 nxft = g.n.cross(ft);
+  A[j].f += f;
+  A[i].f -= f;
+  A[i].t += -g.ai * nxft - moment;
+  A[j].t += -g.aj * nxft + moment;
+}
+
+// Updates the bond's loads from the pair's kinematics g; unless it broke (then it returns
+// true), `out` holds them.
+PELLETDEM_INLINE bool bond_one(Bond& b, const PairGeometry& g, double dt, BondLoad& out) {
   const Vec3& n = g.n;
   // (ft, mt) component by component: X = (ft.x, mt.x), Y = (ft.y, mt.y), Z = (ft.z, mt.z).
   Pair X(b.ft.x(), b.mt.x()), Y(b.ft.y(), b.mt.y()), Z(b.ft.z(), b.mt.z());
@@ -87,8 +117,9 @@ PELLETDEM_INLINE bool bond_one(Bond& b, const PairGeometry& g, double dt, Vec3& 
   // normal, then the mean spin about n. A rigid rotation of the pair then leaves them as they
   // were in the bond's own frame. The tilt is the smallest rotation taking a = n_prev to n,
   // two reflections: R v = v + 2 n (a.v) - s (s.v) / (1 + c) with s = a + n, c = a.n (exact,
-  // no square root). Its middle term lies along n, which the projection below removes, so it
-  // is left out: v - s (s.v) / (1 + c) has R v's part in the bond plane.
+  // no square root). v lies in the plane normal to a, so the middle term is round-off: left
+  // out, the turned vectors stay in the bond plane to round-off, which does not accumulate
+  // (each step's leftover along n is the last one's, with its sign turned, plus new round-off).
   const double c = b.n_prev.dot(n);
   if (c > -0.5) {  // (a reversal in one step never happens)
     const Vec3 sv = b.n_prev + n;
@@ -111,25 +142,21 @@ PELLETDEM_INLINE bool bond_one(Bond& b, const PairGeometry& g, double dt, Vec3& 
   Z = z2;
   b.n_prev = n;
 
-  const Vec3& v_rel = g.v_rel;
+  // Increments from the relative velocities at the contact point: normal parts (v_n, w_n)
+  // and tangential ones (v_t, w_t).
   const Vec3 w_rel = wj - wi;
-  const Pair RX(v_rel.x(), w_rel.x()), RY(v_rel.y(), w_rel.y()), RZ(v_rel.z(), w_rel.z());
+  const double wn = w_rel.dot(n);
+  const Vec3 wt = w_rel - wn * n;
   const double area = b.area(), jpolar = b.polar_moment();
-  // (fn, mn) -= (kn A, kt J) dt (v_rel . n, w_rel . n)
+  // (fn, mn) -= (kn A, kt J) dt (v_n, w_n)
   const Pair kn_pair(b.kn * area * dt, b.kt * jpolar * dt);
-  // (ft, mt) -= (kt A, kn J / 2) dt (v_rel, w_rel)
+  // (ft, mt) -= (kt A, kn J / 2) dt (v_t, w_t)
   const Pair kt_pair(b.kt * area * dt, b.kn * 0.5 * jpolar * dt);
   Pair N(b.fn, b.mn);
-  N -= kn_pair * dot3(RX, RY, RZ, n);
-  // Shear and bending increments from the full relative velocities; projecting onto the plane
-  // normal to n keeps their tangential parts (and removes the round-off of the rotations).
-  X -= kt_pair * RX;
-  Y -= kt_pair * RY;
-  Z -= kt_pair * RZ;
-  const Pair along = dot3(X, Y, Z, n);
-  X -= along * n.x();
-  Y -= along * n.y();
-  Z -= along * n.z();
+  N -= kn_pair * Pair(g.vn, wn);
+  X -= kt_pair * Pair(g.vt.x(), wt.x());
+  Y -= kt_pair * Pair(g.vt.y(), wt.y());
+  Z -= kt_pair * Pair(g.vt.z(), wt.z());
 
   // Eq. 14 times A: sigma A = -F_n + 4 |M_t| / r_b, tau A = |F_t| + 2 |M_n| / r_b. The 1-norm
   // bounds the 2-norm from above, so most bonds pass without a square root.
@@ -169,15 +196,9 @@ PELLETDEM_INLINE bool bond_one(Bond& b, const PairGeometry& g, double dt, Vec3& 
   b.mn = N[1];
   b.ft = Vec3(X[0], Y[0], Z[0]);
   b.mt = Vec3(X[1], Y[1], Z[1]);
-  // Force on j, fn n + ft, and moment on j, mn n + mt, side by side.
-  const Pair FX = N * n.x() + X, FY = N * n.y() + Y, FZ = N * n.z() + Z;
-  // n x ft
-  const Vec3 nxft(n.y() * Z[0] - n.z() * Y[0], n.z() * X[0] - n.x() * Z[0],
-                  n.x() * Y[0] - n.y() * X[0]);
-  const Vec3 moment(FX[1], FY[1], FZ[1]);
-  f = Vec3(FX[0], FY[0], FZ[0]);
-  ti = -g.ai * nxft - moment;
-  tj = -g.aj * nxft + moment;
+  out.fn = N[0];
+  out.ft = b.ft;
+  out.moment = N[1] * n + b.mt;  // mn n + mt
   return false;
 }
 
@@ -185,12 +206,9 @@ PELLETDEM_INLINE bool bond_one(Bond& b, const PairGeometry& g, double dt, Vec3& 
 // updated and added to A, unless it broke (then returns true and adds nothing).
 PELLETDEM_INLINE bool update_bond(Bond& b, const Particles& p, const Motion* mo, double dt, Load* A) {
   const PairGeometry g = pair_geometry(b.i, b.j, p, mo);
-  Vec3 f, ti, tj;
-  if (bond_one(b, g, dt, f, ti, tj)) return true;
-  A[b.j].f += f;
-  A[b.i].f -= f;
-  A[b.i].t += ti;
-  A[b.j].t += tj;
+  BondLoad bl;
+  if (bond_one(b, g, dt, bl)) return true;
+  add_pair_load(b.i, b.j, g, bl.fn, bl.ft, bl.moment, A);
   return false;
 }
 
@@ -367,8 +385,8 @@ PELLETDEM_INLINE void add_loads(Load* A, const Index* gi, const Index* gj, const
 // pair_geometry of four pairs, lane by lane, with the particle values the contact law needs
 // besides (masses, and the rolling-friction caps of eq. 11).
 struct PairLanes {
-  Lane ri, rj, delta, ai, aj, mi, mj, cap_i, cap_j;
-  L3 n, wi, wj, v_rel;
+  Lane ri, rj, delta, ai, aj, mi, mj, cap_i, cap_j, vn;
+  L3 n, wi, wj, v_rel, vt;
 };
 
 PELLETDEM_INLINE PairLanes pair_lanes(const Index* gi, const Index* gj, const PosRad* xr, const Motion* mo) {
@@ -397,14 +415,34 @@ PELLETDEM_INLINE PairLanes pair_lanes(const Index* gi, const Index* gj, const Po
   q.mi = vel_i.c3;
   q.mj = vel_j.c3;
   q.v_rel = {(vel_j.c0 - vel_i.c0) - lxn.x, (vel_j.c1 - vel_i.c1) - lxn.y, (vel_j.c2 - vel_i.c2) - lxn.z};
+  q.vn = lane_dot(q.v_rel, q.n);
+  q.vt = {q.v_rel.x - q.vn * q.n.x, q.v_rel.y - q.vn * q.n.y, q.v_rel.z - q.vn * q.n.z};
   return q;
 }
 
-// bond_one on the kLanes intact bonds g[0..] of the pairs q: their loads updated, f their
-// forces on j, ti and tj their torques. Returns false, having changed nothing, when a bond
-// needs the scalar path.
-PELLETDEM_INLINE bool bond_lanes(Bond* const* g, const PairLanes& q, double dt, bool damage, L3& f,
-                                 L3& ti, L3& tj) {
+// add_pair_load of four pairs q.
+PELLETDEM_INLINE void add_pair_loads(Load* A, const Index* gi, const Index* gj, const PairLanes& q,
+                                     Lane fn, const L3& ft, const L3& moment, Lane roll_i = Lane{},
+                                     Lane roll_j = Lane{}) {
+  const L3& n = q.n;
+  const L3 f{fn * n.x + ft.x, fn * n.y + ft.y, fn * n.z + ft.z};
+  const L3 nxft = lane_cross(n, ft);
+  const Lane mai = -q.ai, maj = -q.aj;
+  const L3 ti{mai * nxft.x - moment.x, mai * nxft.y - moment.y, mai * nxft.z - moment.z};
+  const L3 tj{maj * nxft.x + moment.x, maj * nxft.y + moment.y, maj * nxft.z + moment.z};
+  add_loads(A, gi, gj, f, ti, tj, roll_i, roll_j);
+}
+
+// BondLoad of four bonds.
+struct BondLanes {
+  Lane fn;
+  L3 ft, moment;
+};
+
+// bond_one on the kLanes intact bonds g[0..] of the pairs q: their loads updated and in `out`.
+// Returns false, having changed nothing, when a bond needs the scalar path.
+PELLETDEM_INLINE bool bond_lanes(Bond* const* g, const PairLanes& q, double dt, bool damage,
+                                 BondLanes& out) {
   const L4 run_n = load_run(g, kRunNormal), run_s = load_run(g, kRunShear), run_b = load_run(g, kRunBend);
   const L3 np{run_n.c0, run_n.c1, run_n.c2};
   L3 ft{run_s.c0, run_s.c1, run_s.c2};
@@ -420,24 +458,24 @@ PELLETDEM_INLINE bool bond_lanes(Bond* const* g, const PairLanes& q, double dt, 
   };
   tilt(ft);
   tilt(mt);
-  // Spin about n; beyond the series (never in practice) the scalar path takes it.
+  // Spin about n (small_angle_sin_cos' short series); beyond it, the scalar path.
   const L3 &wi = q.wi, &wj = q.wj;
   const L3 ws{wi.x + wj.x, wi.y + wj.y, wi.z + wj.z};
   const Lane phi = 0.5 * lane_dot(ws, n) * dt;
-  const LaneMask odd = (c <= -0.5) | (lane_abs(phi) >= 1e-2);
+  const LaneMask odd = (c <= -0.5) | (lane_abs(phi) >= kShortSeries);
   const Lane p2 = phi * phi;
-  constexpr double k6 = 1.0 / 6.0, k20 = 1.0 / 20.0, k42 = 1.0 / 42.0;
-  constexpr double k12 = 1.0 / 12.0, k30 = 1.0 / 30.0;
-  const Lane s = phi * (1.0 - p2 * k6 * (1.0 - p2 * k20 * (1.0 - p2 * k42)));
-  const Lane cs = 1.0 - 0.5 * p2 * (1.0 - p2 * k12 * (1.0 - p2 * k30));
+  constexpr double k6 = 1.0 / 6.0, k20 = 1.0 / 20.0, k12 = 1.0 / 12.0;
+  const Lane s = phi * (1.0 - p2 * k6 * (1.0 - p2 * k20));
+  const Lane cs = 1.0 - 0.5 * p2 * (1.0 - p2 * k12);
   auto spin = [&](L3& v) {
     const L3 nxv = lane_cross(n, v);
     v = {cs * v.x + s * nxv.x, cs * v.y + s * nxv.y, cs * v.z + s * nxv.z};
   };
   spin(ft);
   spin(mt);
-  const L3& v_rel = q.v_rel;
   const L3 w_rel{wj.x - wi.x, wj.y - wi.y, wj.z - wi.z};
+  const Lane wn = lane_dot(w_rel, n);
+  const L3 wt{w_rel.x - wn * n.x, w_rel.y - wn * n.y, w_rel.z - wn * n.z};
   const L4 run_k = load_run(g, kRunStiff);
   const Lane rad = run_b.c3, kn = run_k.c0, kt = run_k.c1;
   Lane fn = run_n.c3, mn = run_s.c3;
@@ -445,13 +483,10 @@ PELLETDEM_INLINE bool bond_lanes(Bond* const* g, const PairLanes& q, double dt, 
   const Lane jpolar = 0.5 * kPi * rad * rad * rad * rad;
   const Lane kna = kn * area * dt, kta = kt * area * dt;
   const Lane ktj = kt * jpolar * dt, kni = kn * 0.5 * jpolar * dt;
-  fn -= kna * lane_dot(v_rel, n);
-  mn -= ktj * lane_dot(w_rel, n);
-  ft = {ft.x - kta * v_rel.x, ft.y - kta * v_rel.y, ft.z - kta * v_rel.z};
-  mt = {mt.x - kni * w_rel.x, mt.y - kni * w_rel.y, mt.z - kni * w_rel.z};
-  const Lane ftn = lane_dot(ft, n), mtn = lane_dot(mt, n);
-  ft = {ft.x - ftn * n.x, ft.y - ftn * n.y, ft.z - ftn * n.z};
-  mt = {mt.x - mtn * n.x, mt.y - mtn * n.y, mt.z - mtn * n.z};
+  fn -= kna * q.vn;
+  mn -= ktj * wn;
+  ft = {ft.x - kta * q.vt.x, ft.y - kta * q.vt.y, ft.z - kta * q.vt.z};
+  mt = {mt.x - kni * wt.x, mt.y - kni * wt.y, mt.z - kni * wt.z};
   // Strength bounds of bond_one; a group with a bond past them is redone bond by bond.
   const Lane sc = run_k.c2, tc = run_k.c3;
   // Capacity left: 1 - damage, exactly 1 where no bond softens (`damage` false).
@@ -463,12 +498,9 @@ PELLETDEM_INLINE bool bond_lanes(Bond* const* g, const PairLanes& q, double dt, 
   const Lane tau_bound = ((lane_abs(ft.x) + lane_abs(ft.y)) + lane_abs(ft.z)) * rad + 2.0 * lane_abs(mn);
   if (lane_any(odd | (sig_bound > fs * rad) | (tau_bound > ts * rad))) return false;
 
-  f = {fn * n.x + ft.x, fn * n.y + ft.y, fn * n.z + ft.z};
-  const L3 mom{mn * n.x + mt.x, mn * n.y + mt.y, mn * n.z + mt.z};
-  const L3 nxft = lane_cross(n, ft);
-  const Lane mai = -q.ai, maj = -q.aj;
-  ti = {mai * nxft.x - mom.x, mai * nxft.y - mom.y, mai * nxft.z - mom.z};
-  tj = {maj * nxft.x + mom.x, maj * nxft.y + mom.y, maj * nxft.z + mom.z};
+  out.fn = fn;
+  out.ft = ft;
+  out.moment = {mn * n.x + mt.x, mn * n.y + mt.y, mn * n.z + mt.z};
   store_run(g, kRunNormal, n.x, n.y, n.z, fn);
   store_run(g, kRunShear, ft.x, ft.y, ft.z, mn);
   store_run(g, kRunBend, mt.x, mt.y, mt.z, rad);  // the radius goes back unchanged
@@ -485,9 +517,9 @@ PELLETDEM_INLINE bool update_bond_group(Bond* const* g, const PosRad* xr, const 
     bj[k] = g[k]->j;
   }
   const PairLanes q = pair_lanes(bi, bj, xr, mo);
-  L3 f, ti, tj;
-  if (!bond_lanes(g, q, dt, damage, f, ti, tj)) return false;
-  add_loads(A, bi, bj, f, ti, tj);
+  BondLanes bl;
+  if (!bond_lanes(g, q, dt, damage, bl)) return false;
+  add_pair_loads(A, bi, bj, q, bl.fn, bl.ft, bl.moment);
   return true;
 }
 #endif
@@ -510,8 +542,7 @@ PELLETDEM_INLINE ContactForce contact_force(Index i, Index j, ContactHistory& h,
                                             const ContactLawParams& cp, double dt_inc, double adh,
                                             PairStats& out) {
   const double ri = p.r[i], rj = p.r[j];
-  const double vn = g.v_rel.dot(g.n);
-  ContactKinematics c{g.delta, vn, g.v_rel - vn * g.n, g.n, ri * rj / (ri + rj),
+  ContactKinematics c{g.delta, g.vn, g.vt, g.n, ri * rj / (ri + rj),
                       p.m[i] * p.m[j] / (p.m[i] + p.m[j])};
   const ContactForce cf = law.evaluate(c, h, dt_inc, cp.mu, adh);
   ++out.contacts;
@@ -547,21 +578,12 @@ PELLETDEM_INLINE bool bonded_one(Index i, Index j, ContactHistory& h, Bond& b, c
                                  PairStats& out) {
   const PairGeometry g = pair_geometry(i, j, p, mo);
   const ContactForce cf = contact_force(i, j, h, g, p, law, cp, dt_inc, adh, out);
-  Vec3 f = cf.fn * g.n + cf.ft;
-  const Vec3 nxft = g.n.cross(cf.ft);
-  Vec3 ti = -g.ai * nxft, tj = -g.aj * nxft;
-  Vec3 fb, tib, tjb;
-  const bool broke = bond_one(b, g, dt_inc, fb, tib, tjb);
-  if (!broke) {
-    f += fb;
-    ti += tib;
-    tj += tjb;
-  }
-  A[j].f += f;
-  A[i].f -= f;
-  A[i].t += ti;
+  BondLoad bl;
+  const bool broke = bond_one(b, g, dt_inc, bl);
+  if (broke) bl = BondLoad{0.0, Vec3::Zero(), Vec3::Zero()};
+  // The contact's and the bond's normal and tangential forces act at the same point.
+  add_pair_load(i, j, g, cf.fn + bl.fn, cf.ft + bl.ft, bl.moment, A);
   A[i].roll += rolling_moment(cp.rolling, cf.fn, p.r[i], mo[i].roll_cap);
-  A[j].t += tj;
   A[j].roll += rolling_moment(cp.rolling, cf.fn, p.r[j], mo[j].roll_cap);
   return broke;
 }
@@ -577,8 +599,7 @@ PELLETDEM_INLINE void contact_law_lanes(const PairLanes& q, const L4& hist, cons
                                         Lane& fn, L3& ft, Lane& delta0, L3& hft) {
   const L3& nv = q.n;
   const Lane delta = q.delta;
-  const Lane vn = lane_dot(q.v_rel, nv);
-  const L3 vt{q.v_rel.x - vn * nv.x, q.v_rel.y - vn * nv.y, q.v_rel.z - vn * nv.z};
+  const L3& vt = q.vt;
   const Lane m_eff = q.mi * q.mj / (q.mi + q.mj);
 
   // Eq. 5 (HystereticLaw::normal_force with scale 1 and constant k2).
@@ -684,20 +705,16 @@ PELLETDEM_INLINE bool bonded_group(const Index* gi, const Index* gj, ContactHist
                                    double dt_inc, double adh, bool damage, Load* A,
                                    PairStats& out) {
   const PairLanes q = pair_lanes(gi, gj, xr, mo);
-  L3 fb, tib, tjb;
-  if (!bond_lanes(gb, q, dt_inc, damage, fb, tib, tjb)) return false;
+  BondLanes bl;
+  if (!bond_lanes(gb, q, dt_inc, damage, bl)) return false;
   const L4 hist = load_run(gh, 0);
   Lane fn, delta0;
   L3 ft, hft;
   contact_law_lanes(q, hist, law, cp, dt_inc, adh, fn, ft, delta0, hft);
   store_run(gh, 0, delta0, hft.x, hft.y, hft.z);
-  const L3& nv = q.n;
-  const L3 f{(fn * nv.x + ft.x) + fb.x, (fn * nv.y + ft.y) + fb.y, (fn * nv.z + ft.z) + fb.z};
-  const L3 nxft = lane_cross(nv, ft);
-  const Lane mai = -q.ai, maj = -q.aj;
-  const L3 ti{mai * nxft.x + tib.x, mai * nxft.y + tib.y, mai * nxft.z + tib.z};
-  const L3 tj{maj * nxft.x + tjb.x, maj * nxft.y + tjb.y, maj * nxft.z + tjb.z};
-  add_loads(A, gi, gj, f, ti, tj, roll_lanes(cp, fn, q.ri, q.cap_i), roll_lanes(cp, fn, q.rj, q.cap_j));
+  // The contact's and the bond's normal and tangential forces act at the same point.
+  add_pair_loads(A, gi, gj, q, fn + bl.fn, L3{ft.x + bl.ft.x, ft.y + bl.ft.y, ft.z + bl.ft.z}, bl.moment,
+                 roll_lanes(cp, fn, q.ri, q.cap_i), roll_lanes(cp, fn, q.rj, q.cap_j));
   out.contacts += kLanes;
   note_overlap(out, q.delta, q.ri, q.rj, gi, gj);
   return true;
