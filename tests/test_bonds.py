@@ -645,3 +645,42 @@ def test_bonded_pair_continues_bit_for_bit_from_a_saved_state():
     for k in ("fn", "ft", "mn", "mt"):
         np.testing.assert_array_equal(a[k], b[k])
     np.testing.assert_array_equal(w.positions(), copy.positions())
+
+
+def _stretched_chain(skin):
+    """Six heavy spheres in a row, bonded to their neighbours across 1 um gaps and pulled apart
+    with shear and spin: every bond stretches by ~1.2e-5 m in 300 steps."""
+    n = 6
+    r = np.where(np.arange(n) % 2 == 0, R1, R2)
+    x = np.zeros((n, 3))
+    for k in range(1, n):
+        x[k, 0] = x[k - 1, 0] + r[k - 1] + r[k] + GAP
+    w = pd.World(dt=2e-6, gravity=(0, 0, 0), box=BOX, skin=skin, **HEAVY)
+    w.add_particles(x, r)
+    assert w.create_bonds(pd.BondLaw(gap_tolerance=2 * GAP).to_core()) == n - 1
+    k = np.arange(n)[:, None]
+    v = (k - 2.5) * np.array([[0.01, 0.003, -0.002]])
+    spin = np.cos(k + np.array([[0.0, 1.0, 2.0]])) * 30.0
+    w.set_velocities(v, spin)
+    return w
+
+
+def test_a_bond_is_the_same_in_and_out_of_the_neighbour_list():
+    """The pair loop updates a bond whose pair is listed, the bond loop one whose pair has left
+    the list (stretched past r_i + r_j + skin). A 50 um skin keeps the chain's pairs listed for
+    the whole run, a 2 um one drops them within ~100 steps: the bonds, forces and torques must
+    agree bit for bit (the pairs are apart, so no contact acts, and each particle's two bonds
+    add in bond order either way)."""
+    listed, dropped = _stretched_chain(skin=5e-5), _stretched_chain(skin=2e-6)
+    listed.run(300)
+    dropped.run(300)
+    i, _ = _core.neighbor_pairs(listed._core)
+    assert len(i) == 5
+    i, _ = _core.neighbor_pairs(dropped._core)
+    assert len(i) == 0
+    a, b = listed.bonds(), dropped.bonds()
+    for key in ("fn", "ft", "mn", "mt"):
+        np.testing.assert_array_equal(a[key], b[key])
+        assert np.all(np.abs(a[key]) > 0) if key in ("fn", "mn") else np.abs(a[key]).max() > 0
+    np.testing.assert_array_equal(np.array(listed.f), np.array(dropped.f))
+    np.testing.assert_array_equal(np.array(listed.t), np.array(dropped.t))
