@@ -114,7 +114,13 @@ particles, but only 0.33 -> 0.09 for 10k.  The cost per step depends strongly on
 it: ~1.7e7 particle-steps/s at CN ~0.3 against ~3-4e6 at CN ~4 (10k, 1 core).
 For a well-defined, contact-rich reference, use ``timed_gravity=9.81`` (CLI
 ``--gravity 9.81``): the bed stays loaded as it was settled, with CN 3.4-4.3,
-constant over the run.  For like-for-like figures, time pelletdem and LIGGGHTS
+constant over the run.  bench_engine.py does so (since 2026-12-04; before, it timed
+at 9.81e-4 a bed settled at 9.81, which sprang apart: CN 4.4 -> 0.06 here, ~2 in
+pelletdem), and lets LIGGGHTS settle pelletdem's bed again first (once, read back
+with ``read_dump_bed``): its linear spring has no plastic part, so it springs back
+from overlaps that pelletdem's hysteretic contacts hold at rest (10,000 bed: CN 4.5
+-> 0.3 in 2,000 steps with k_n = k2, -> 1.0 with k_n = k1; at rest again, CN 4.5,
+after 30,000 steps with k_n = k_t = k1, the springs the benchmark uses).  For like-for-like figures, time pelletdem and LIGGGHTS
 on the SAME bed.  Either load ``bed.csv`` (``load_bed_csv``) into pelletdem, or
 pass pelletdem's bed to ``run_liggghts_bed(..., bed=(x, r))``; this skips
 settling.  Report the CN with the figures.  ``time_settled_bed(workdir)``
@@ -296,8 +302,10 @@ def _deck_header(L: list[str], nprocs: int) -> None:
         a("processors * * 1")
 
 
-def _deck_contact(L: list[str], contact: str, rolling: str | None, skin: float) -> None:
-    """Neighbour settings, material properties, pair style and primitive walls."""
+def _deck_contact(L: list[str], contact: str, rolling: str | None, skin: float,
+                  kn: float = K_N, kt: float = K_T) -> None:
+    """Neighbour settings, material properties, pair style and primitive walls; kn, kt: the
+    hooke/stiffness springs, N/m."""
     a = L.append
     model = f"model {contact} tangential history"
     if rolling:
@@ -306,9 +314,9 @@ def _deck_contact(L: list[str], contact: str, rolling: str | None, skin: float) 
     a("neigh_modify delay 0")
     a("# ---- material / contact properties (type 1 particles, type 2 walls)")
     if contact == "hooke/stiffness":
-        g = _damping_rate(K_N, R_MEAN, RESTITUTION)
-        a(f"fix m_kn all property/global kn peratomtypepair 2 {K_N:g} {K_N:g} {K_N:g} {K_N:g}")
-        a(f"fix m_kt all property/global kt peratomtypepair 2 {K_T:g} {K_T:g} {K_T:g} {K_T:g}")
+        g = _damping_rate(kn, R_MEAN, RESTITUTION)
+        a(f"fix m_kn all property/global kn peratomtypepair 2 {kn:g} {kn:g} {kn:g} {kn:g}")
+        a(f"fix m_kt all property/global kt peratomtypepair 2 {kt:g} {kt:g} {kt:g} {kt:g}")
         a(f"fix m_gn all property/global gamman peratomtypepair 2 {g:.6g} {g:.6g} {g:.6g} {g:.6g}")
         a(f"fix m_gt all property/global gammat peratomtypepair 2 {g:.6g} {g:.6g} {g:.6g} {g:.6g}")
     elif contact == "hooke/hysteresis":
@@ -352,7 +360,8 @@ def build_settle_deck(n_particles: int, seed: int, dt: float, *,
                       settle_damping_rate: float = 500.0, timed_gravity: float = GRAVITY,
                       unload_steps: int = 1000, unload_hold: int = 250,
                       unload_damping_rate: float = 2000.0, skin: float = 4.0e-5,
-                      nprocs: int = 1, data_out: str = "settled.data") -> tuple[str, dict]:
+                      nprocs: int = 1, data_out: str = "settled.data", kn: float = K_N,
+                      kt: float = K_T) -> tuple[str, dict]:
     """Deck 1: insert, settle under g_settle, unload gravity to timed_gravity, write_data."""
     if n_particles < 1:
         raise ValueError("n_particles must be >= 1")
@@ -379,7 +388,7 @@ def build_settle_deck(n_particles: int, seed: int, dt: float, *,
     _deck_header(L, nprocs)
     a(f"region domain block {-half:.6g} {half:.6g} {-half:.6g} {half:.6g} -0.0005 {z_top:.6g} units box")
     a("create_box 2 domain")   # type 1 = particles, type 2 = walls
-    _deck_contact(L, contact, rolling, skin)
+    _deck_contact(L, contact, rolling, skin, kn, kt)
     a("")
     a(f"# ---- radius classes: truncated normal ({R_MEAN} +- {R_SD} m in [{R_MIN}, {R_MAX}]),"
       f" {len(radii)} classes, number fractions")
@@ -473,7 +482,8 @@ def build_settle_deck(n_particles: int, seed: int, dt: float, *,
 def build_timed_deck(data_file: str, n_steps: int, dt: float, *,
                      contact: str = "hooke/stiffness", rolling: str | None = "cdt",
                      timed_gravity: float = GRAVITY, n_relax: int = 0, skin: float = 4.0e-5,
-                     nprocs: int = 1, dump_final: bool = True) -> str:
+                     nprocs: int = 1, dump_final: bool = True, kn: float = K_N,
+                     kt: float = K_T) -> str:
     """Deck 2: read the settled bed (at rest) and time exactly n_steps steps."""
     if n_steps < 1:
         raise ValueError("n_steps must be >= 1")
@@ -482,7 +492,7 @@ def build_timed_deck(data_file: str, n_steps: int, dt: float, *,
     a("# pelletdem reference bed, deck 2/2 (timed run) -- generated by benchmarks/liggghts_ref.py")
     _deck_header(L, nprocs)
     a(f"read_data {data_file}")
-    _deck_contact(L, contact, rolling, skin)
+    _deck_contact(L, contact, rolling, skin, kn, kt)
     a(f"timestep {dt:.6g}")
     a(f"fix gravi all gravity {timed_gravity:g} vector 0.0 0.0 -1.0")
     a("fix integr all nve/sphere")
@@ -597,6 +607,19 @@ def _bed_stats(dump_path: str) -> dict:
                 mean_radius_m=float(r.mean()), std_radius_m=float(r.std()))
 
 
+def read_dump_bed(dump_path: str) -> tuple[np.ndarray, np.ndarray]:
+    """(x[N,3], r[N]) in m from a final dump (``id radius x y z``), in id order: the order of
+    the bed file the run started from."""
+    with open(dump_path) as fh:
+        lines = fh.readlines()
+    i = next(k for k, ln in enumerate(lines) if ln.startswith("ITEM: ATOMS"))
+    cols = lines[i].split()[2:]
+    data = np.loadtxt(lines[i + 1:], ndmin=2)
+    data = data[np.argsort(data[:, cols.index("id")])]
+    x = np.stack([data[:, cols.index(c)] for c in ("x", "y", "z")], axis=1)
+    return x, data[:, cols.index("radius")].copy()
+
+
 def _tail(text: str, n: int = 40) -> str:
     return "\n".join(text.splitlines()[-n:])
 
@@ -664,7 +687,8 @@ def run_liggghts_bed(n_particles: int, n_steps: int = 2000, threads: int = 1, se
                      timed_gravity: float = GRAVITY, n_relax: int = 0,
                      contact: str = "hooke/stiffness", rolling: str | None = "cdt",
                      skin: float = 4.0e-5, timeout_s: float | None = None,
-                     bed: tuple | None = None, **settle_kw) -> dict:
+                     bed: tuple | None = None, kn: float = K_N, kt: float = K_T,
+                     **settle_kw) -> dict:
     """Build, settle and time a dense bed of `n_particles` spheres in LIGGGHTS.
 
     Two LIGGGHTS processes: deck 1 (``in.settle``) inserts, settles, unloads gravity
@@ -681,7 +705,9 @@ def run_liggghts_bed(n_particles: int, n_steps: int = 2000, threads: int = 1, se
 
     ``bed=(x, r)`` (positions [N,3] and radii [N] in m, e.g. pelletdem's own settled
     bed) skips deck 1 and times that bed instead (from rest, density 6.8e6 kg/m3);
-    n_particles must then equal N, and settle_time_s is 0.
+    n_particles must then equal N, and settle_time_s is 0. ``kn``, ``kt`` (N/m): the
+    hooke/stiffness springs of that timed run (K_N, K_T by default; a bed settled by
+    pelletdem is in equilibrium with kn = kt = K1, its loading stiffness).
     """
     exe = _liggghts_exe()
     if exe is None:
@@ -716,9 +742,10 @@ def run_liggghts_bed(n_particles: int, n_steps: int = 2000, threads: int = 1, se
         write_bed_files(bx, br, bed_data, bed_csv, note="(given bed)")
         res = _timed_run(prefix, exe, workdir, n_steps, dt, contact=contact, rolling=rolling,
                          timed_gravity=timed_gravity, n_relax=n_relax, skin=skin, nprocs=threads,
-                         timeout_s=timeout_s)
+                         timeout_s=timeout_s, kn=kn, kt=kt)
         relax_time = res.pop("_relax_time_s")
         res["total_wall_s"] = res.pop("_wall_s")
+        res.update(kn=kn, kt=kt)
         res.update(n_requested=n_particles, settle_time_s=relax_time, settle_steps=0,
                    settle_deck=None, bed_source="given", contact=contact, rolling=rolling,
                    skin_m=skin)
@@ -727,7 +754,7 @@ def run_liggghts_bed(n_particles: int, n_steps: int = 2000, threads: int = 1, se
     # ---- deck 1: insert + settle (+ unload)
     settle_text, meta = build_settle_deck(n_particles, seed, dt, contact=contact, rolling=rolling,
                                           skin=skin, timed_gravity=timed_gravity, nprocs=threads,
-                                          data_out="settled.data", **settle_kw)
+                                          data_out="settled.data", kn=kn, kt=kt, **settle_kw)
     settle_deck = os.path.join(workdir, "in.settle")
     with open(settle_deck, "w") as fh:
         fh.write(settle_text)
@@ -741,7 +768,7 @@ def run_liggghts_bed(n_particles: int, n_steps: int = 2000, threads: int = 1, se
     # ---- deck 2: timed run from rest
     res = _timed_run(prefix, exe, workdir, n_steps, dt, contact=contact, rolling=rolling,
                      timed_gravity=timed_gravity, n_relax=n_relax, skin=skin, nprocs=threads,
-                     timeout_s=timeout_s)
+                     timeout_s=timeout_s, kn=kn, kt=kt)
     relax_time = res.pop("_relax_time_s")
     wall2 = res.pop("_wall_s")
     res.update(
@@ -766,11 +793,12 @@ def run_liggghts_bed(n_particles: int, n_steps: int = 2000, threads: int = 1, se
 
 def _timed_run(prefix: list[str], exe: str, workdir: str, n_steps: int, dt: float, *,
                contact: str, rolling: str | None, timed_gravity: float, n_relax: int,
-               skin: float, nprocs: int, timeout_s: float | None) -> dict:
+               skin: float, nprocs: int, timeout_s: float | None, kn: float = K_N,
+               kt: float = K_T) -> dict:
     """Write and run deck 2 (in.timed) on workdir/bed_start.data; parse the timed loop."""
     timed_text = build_timed_deck("bed_start.data", n_steps, dt, contact=contact, rolling=rolling,
                                   timed_gravity=timed_gravity, n_relax=n_relax, skin=skin,
-                                  nprocs=nprocs)
+                                  nprocs=nprocs, kn=kn, kt=kt)
     deck = os.path.join(workdir, "in.timed")
     with open(deck, "w") as fh:
         fh.write(timed_text)
@@ -806,6 +834,7 @@ def _timed_run(prefix: list[str], exe: str, workdir: str, n_steps: int, dt: floa
         bed_file=os.path.join(workdir, "bed.csv"),
         workdir=workdir,
         cn_timed_start=_grab("@@PELLETDEM_CN_START", out2),
+        cn_after_relax=_grab("@@PELLETDEM_CN_AFTER_RELAX", out2),
         cn_timed_end=_grab("@@PELLETDEM_CN_END", out2),
         neighbor_builds_timed=int(mnb.group(1)) if mnb else None,
         neighs_per_atom=float(mnn.group(1)) if mnn else None,
