@@ -21,9 +21,10 @@ among them (a settled bed keeps its contacts). It measures peak memory per parti
 process, and times the bed compacted by a
 piston to 120 MPa (the costliest state of a pellet's life, with a higher coordination
 number), and a bonded bed (`--bonded-n`, every contact bonded, coordination number ~12, see
-bench_bonds.py) against the same bed unbonded. The last lines are the figures: particle-steps
-per second, ratios against LIGGGHTS per core, the 1 -> 2 thread speed-up, bytes per particle,
-and the bonded/unbonded time per step. Ratios are taken against references measured in the
+bench_bonds.py) against the same bed unbonded (its bonded/unbonded time per step is printed
+before the engine's figures). The last lines are the figures: particle-steps per second,
+ratios against LIGGGHTS per core, the 1 -> 2 thread speed-up and bytes per particle, each
+against its target. Ratios are taken against references measured in the
 same run, since the machine is shared and noisy.
 """
 from __future__ import annotations
@@ -215,6 +216,38 @@ def memory_per_particle(n: int) -> dict:
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
+def summary(rows: list[dict]) -> list[str]:
+    """The engine's figures and the issue's targets, as the benchmark's last lines."""
+    out = []
+    # The state timed, in both codes: coordination number at the start and end of the timed
+    # steps, and the neighbour-list builds among them (few: the bed is at rest).
+    for row in rows:
+        out.append(f"# N {row['n']}: timed bed CN {row['cn_1'][0]:.2f} -> {row['cn_1'][1]:.2f}, "
+                   f"{row['builds_1']} list builds (1 thread)" +
+                   (f"; LIGGGHTS CN {row['liggghts_cn'][1]} -> {row['liggghts_cn'][2]}, "
+                    f"{row['liggghts_builds']} builds" if "liggghts_cn" in row else ""))
+    out.append(f"{'N':>7} {'Mps/s 1T':>9} {'Mps/s 2T':>9} {'2T/1T':>6} {'LIGGGHTS 1T':>11} {'ours/LIGGGHTS':>13} "
+               f"{'B/particle':>10} {'compacted CN':>12} {'comp 1T':>8} {'comp 2T':>8}")
+    for row in rows:
+        lg = row.get("liggghts_ps_1", float("nan"))
+        out.append(f"{row['n']:>7} {row['ps_1']/1e6:>9.2f} {row['ps_2']/1e6:>9.2f} {row['ps_2']/row['ps_1']:>6.2f} "
+                   f"{lg/1e6:>11.2f} {row['ps_1']/lg:>13.2f} {row['bytes_per_particle']:>10.0f} "
+                   f"{row.get('compacted_cn', float('nan')):>12.2f} {row.get('compacted_ps_1', float('nan'))/1e6:>8.2f} "
+                   f"{row.get('compacted_ps_2', float('nan'))/1e6:>8.2f}")
+
+    def verdict(ok):
+        return "met" if ok else "NOT met"
+
+    for row in rows:
+        lg = row.get("liggghts_ps_1", float("nan"))
+        speedup, ratio, mem = row["ps_2"] / row["ps_1"], row["ps_1"] / lg, row["bytes_per_particle"]
+        out.append(f"N {row['n']}: per core {ratio:.2f}x LIGGGHTS (target >= 2: "
+                   f"{verdict(ratio >= 2) if lg == lg else 'not timed'}); 1 -> 2 threads x{speedup:.2f} "
+                   f"(target >= 1.8: {verdict(speedup >= 1.8)}); {mem:.0f} B/particle "
+                   f"(target < 1024: {verdict(mem < 1024)})")
+    return out
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--sizes", type=int, nargs="+", default=[10000, 40000])
@@ -287,25 +320,9 @@ def main(argv=None) -> int:
                     row[f"compacted_ps_{th}"] = max(row.get(f"compacted_ps_{th}", 0.0), ps)
         rows.append(row)
         print("# " + json.dumps(row), flush=True)
-    print()
-    # The state timed, in both codes: coordination number at the start and end of the timed
-    # steps, and the neighbour-list builds among them (few: the bed is at rest).
-    for row in rows:
-        print(f"# N {row['n']}: timed bed CN {row['cn_1'][0]:.2f} -> {row['cn_1'][1]:.2f}, "
-              f"{row['builds_1']} list builds (1 thread)" +
-              (f"; LIGGGHTS CN {row['liggghts_cn'][1]} -> {row['liggghts_cn'][2]}, "
-               f"{row['liggghts_builds']} builds" if "liggghts_cn" in row else ""))
-    print(f"{'N':>7} {'Mps/s 1T':>9} {'Mps/s 2T':>9} {'2T/1T':>6} {'LIGGGHTS 1T':>11} {'ours/LIGGGHTS':>13} "
-          f"{'B/particle':>10} {'compacted CN':>12} {'comp 1T':>8} {'comp 2T':>8}")
-    for row in rows:
-        lg = row.get("liggghts_ps_1", float("nan"))
-        print(f"{row['n']:>7} {row['ps_1']/1e6:>9.2f} {row['ps_2']/1e6:>9.2f} {row['ps_2']/row['ps_1']:>6.2f} "
-              f"{lg/1e6:>11.2f} {row['ps_1']/lg:>13.2f} {row['bytes_per_particle']:>10.0f} "
-              f"{row.get('compacted_cn', float('nan')):>12.2f} {row.get('compacted_ps_1', float('nan'))/1e6:>8.2f} "
-              f"{row.get('compacted_ps_2', float('nan'))/1e6:>8.2f}")
     if a.bonded_n > 0:
-        # The bonded bed against the same bed unbonded, timed alternately in this run: the last
-        # lines give the bonded/unbonded time per step (target < 1.5).
+        # The bonded bed against the same bed unbonded, timed alternately in this run; its
+        # bonded/unbonded time per step (target < 1.5) comes before the engine's figures.
         print()
         print(f"# bonded bed of {a.bonded_n} (benchmarks/bench_bonds.py)", flush=True)
         sys.path.insert(0, HERE)
@@ -313,6 +330,8 @@ def main(argv=None) -> int:
 
         # Its own sampling (many short samples in turn, see its docstring), not --steps.
         bench_bonds.main(["--n", str(a.bonded_n), "--threads", "1,2"])
+    print()
+    print("\n".join(summary(rows)))
     return 0
 
 
