@@ -114,14 +114,14 @@ particles, but only 0.33 -> 0.09 for 10k.  The cost per step depends strongly on
 it: ~1.7e7 particle-steps/s at CN ~0.3 against ~3-4e6 at CN ~4 (10k, 1 core).
 For a well-defined, contact-rich reference, use ``timed_gravity=9.81`` (CLI
 ``--gravity 9.81``): the bed stays loaded as it was settled, with CN 3.4-4.3,
-constant over the run.  bench_engine.py does so (since 2026-12-04; before, it timed
-at 9.81e-4 a bed settled at 9.81, which sprang apart: CN 4.4 -> 0.06 here, ~2 in
-pelletdem), and lets LIGGGHTS settle pelletdem's bed again first (once, read back
-with ``read_dump_bed``): its linear spring has no plastic part, so it springs back
-from overlaps that pelletdem's hysteretic contacts hold at rest (10,000 bed: CN 4.5
--> 0.3 in 2,000 steps with k_n = k2, -> 1.0 with k_n = k1; at rest again, CN 4.5,
-after 30,000 steps with k_n = k_t = k1, the springs the benchmark uses).  For like-for-like figures, time pelletdem and LIGGGHTS
-on the SAME bed.  Either load ``bed.csv`` (``load_bed_csv``) into pelletdem, or
+constant over the run.  bench_engine.py does so (since 2026-12-04; before, it
+timed at 9.81e-4 a bed settled at 9.81, which sprang apart: CN 4.4 -> 0.06 here,
+~2 in pelletdem), and lets LIGGGHTS settle pelletdem's bed again first (once, read
+back with ``read_dump_bed``): its linear spring has no plastic part, so it springs
+back from overlaps that pelletdem's hysteretic contacts hold at rest (10,000 bed:
+CN 4.5 -> 0.3 in 2,000 steps with k_n = k2, -> 1.0 with k_n = k1; at rest again,
+CN 4.5, after 30,000 steps with k_n = k_t = k1, the springs the benchmark uses).
+For like-for-like figures, time pelletdem and LIGGGHTS on the SAME bed.  Either load ``bed.csv`` (``load_bed_csv``) into pelletdem, or
 pass pelletdem's bed to ``run_liggghts_bed(..., bed=(x, r))``; this skips
 settling.  Report the CN with the figures.  ``time_settled_bed(workdir)``
 re-times an already settled bed, for repeats or other thread counts.
@@ -583,13 +583,17 @@ def _convert_data(src: str, dst: str, csv_out: str) -> dict:
 
 
 # ----------------------------------------------------------------------------- analysis
-def _bed_stats(dump_path: str) -> dict:
-    """Solid fraction in a core sample of the bed and bed height from a final dump."""
+def _read_dump(dump_path: str) -> tuple[list[str], np.ndarray]:
+    """The column names and rows of a final dump's ATOMS section."""
     with open(dump_path) as fh:
         lines = fh.readlines()
     i = next(k for k, ln in enumerate(lines) if ln.startswith("ITEM: ATOMS"))
-    cols = lines[i].split()[2:]
-    data = np.loadtxt(lines[i + 1:], ndmin=2)
+    return lines[i].split()[2:], np.loadtxt(lines[i + 1:], ndmin=2)
+
+
+def _bed_stats(dump_path: str) -> dict:
+    """Solid fraction in a core sample of the bed and bed height from a final dump."""
+    cols, data = _read_dump(dump_path)
     r = data[:, cols.index("radius")]
     x, y, z = (data[:, cols.index(c)] for c in ("x", "y", "z"))
     # bed height: mean of the top 1 % of sphere tops (robust to a few rattlers)
@@ -610,11 +614,7 @@ def _bed_stats(dump_path: str) -> dict:
 def read_dump_bed(dump_path: str) -> tuple[np.ndarray, np.ndarray]:
     """(x[N,3], r[N]) in m from a final dump (``id radius x y z``), in id order: the order of
     the bed file the run started from."""
-    with open(dump_path) as fh:
-        lines = fh.readlines()
-    i = next(k for k, ln in enumerate(lines) if ln.startswith("ITEM: ATOMS"))
-    cols = lines[i].split()[2:]
-    data = np.loadtxt(lines[i + 1:], ndmin=2)
+    cols, data = _read_dump(dump_path)
     data = data[np.argsort(data[:, cols.index("id")])]
     x = np.stack([data[:, cols.index(c)] for c in ("x", "y", "z")], axis=1)
     return x, data[:, cols.index("radius")].copy()
