@@ -117,9 +117,14 @@ def _morton(x, r):
     return x[order], r[order]
 
 
-# The bed's weight: 9.81 m/s^2 on the scaled masses (particle density 680 x 1e4 kg/m^3), the
-# weight stages.fill settles a bed under (Preset.fill_gravity_factor). LIGGGHTS gets the same.
-G_EFF = 9.81
+def _fill_gravity() -> float:
+    """The acceleration (m/s^2) on the scaled masses that stages.fill settles a bed under:
+    9.81 fill_gravity_factor / density_scale (9.81 with the default preset). LIGGGHTS gets it too."""
+    p = _preset(1)
+    return 9.81 * p.fill_gravity_factor / p.density_scale
+
+
+G_EFF = _fill_gravity()
 
 
 def _world(x, r, threads):
