@@ -186,14 +186,13 @@ def main(argv=None) -> int:
     if a.bed == "lattice":
         print(f"building the bed: {a.n} particles on a squeezed fcc lattice", flush=True)
         bed, info = build_lattice(a.n, a.seed, max(threads), skin=a.skin)
-        print(f"bed: N = {info['n']}, CN = {info['cn']:.2f} ({info['contacts']} contacts), "
-              f"built in {info['build_s']:.0f} s")
+        loading = ""
     else:
         print(f"building the bed: {a.n} particles, 10 mm mould, piston to CN = {a.cn}", flush=True)
         bed, info = build_bed(a.n, a.cn, a.piston_speed, a.max_stress, a.seed, max(threads), skin=a.skin)
-        print(f"bed: N = {info['n']}, CN = {info['cn']:.2f} ({info['contacts']} contacts), "
-              f"sigma_z = {info['sigma_z_MPa']:.1f} MPa, height {info['height_mm']:.2f} mm, "
-              f"built in {info['build_s']:.0f} s")
+        loading = f"sigma_z = {info['sigma_z_MPa']:.1f} MPa, height {info['height_mm']:.2f} mm, "
+    print(f"bed: N = {info['n']}, CN = {info['cn']:.2f} ({info['contacts']} contacts), "
+          f"{loading}built in {info['build_s']:.0f} s")
 
     plain = bed.clone()
     bonded = bed.clone()
