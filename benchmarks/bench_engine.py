@@ -20,11 +20,12 @@ coordination number at the start and end of the timed steps in both codes and th
 among them (a settled bed keeps its contacts). It measures peak memory per particle in a fresh
 process, and times the bed compacted by a
 piston to 120 MPa (the costliest state of a pellet's life, with a higher coordination
-number), and a bonded bed (`--bonded-n`, every contact bonded, coordination number ~12, see
-bench_bonds.py) against the same bed unbonded (its bonded/unbonded time per step is printed
-before the engine's figures). The last lines are the figures: particle-steps per second,
-ratios against LIGGGHTS per core, the 1 -> 2 thread speed-up and bytes per particle, each
-against its target. Ratios are taken against references measured in the
+number), and two bonded beds of `--bonded-n` particles against the same beds unbonded (see
+bench_bonds.py; their bonded/unbonded times per step are printed before the engine's figures):
+the compacted pellet with every contact and the nearest gaps bonded (bond CN ~10), and a
+squeezed lattice whose contacts alone have CN ~11, every contact bonded. The last lines are
+the figures: particle-steps per second, ratios against LIGGGHTS per core, the 1 -> 2 thread
+speed-up and bytes per particle, each against its target. Ratios are taken against references measured in the
 same run, since the machine is shared and noisy.
 """
 from __future__ import annotations
@@ -271,8 +272,9 @@ def main(argv=None) -> int:
     ap.add_argument("--compacted-sizes", type=int, nargs="+", default=[10000],
                     help="sizes whose compacted state is timed too (compaction is the slow part)")
     ap.add_argument("--bonded-n", type=int, default=8000,
-                    help="particles of the bonded bed (every contact bonded, CN ~ 12; bench_bonds.py) "
-                         "timed against the same bed unbonded on 1 and 2 threads; 0 skips it")
+                    help="particles of the bonded beds (bench_bonds.py: the compacted pellet, bond CN ~10, and "
+                         "the squeezed lattice, contact CN ~11, every contact bonded), each timed against "
+                         "itself unbonded on 1 and 2 threads; 0 skips them")
     ap.add_argument("--memory-worker", type=int, help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
     if a.memory_worker:
@@ -333,6 +335,10 @@ def main(argv=None) -> int:
 
         # Its own sampling (many short samples in turn, see its docstring), not --steps.
         bench_bonds.main(["--n", str(a.bonded_n), "--threads", "1,2"])
+        # And the bed whose contacts alone have CN ~11, every contact bonded (--bed lattice).
+        print()
+        print(f"# bonded lattice of {a.bonded_n} (benchmarks/bench_bonds.py --bed lattice)", flush=True)
+        bench_bonds.main(["--bed", "lattice", "--n", str(a.bonded_n), "--threads", "1,2"])
     print()
     print("\n".join(summary(rows)))
     return 0
