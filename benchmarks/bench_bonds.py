@@ -109,7 +109,7 @@ def build_lattice(n: int, seed: int, threads: int, skin: float = 2e-5, squeeze: 
     if not 0.0 <= spread < squeeze < 0.2:
         raise ValueError(f"need 0 <= spread < squeeze < 0.2, got spread = {spread}, squeeze = {squeeze}")
     t0 = time.perf_counter()
-    r0 = 2e-4
+    r0 = 2e-4  # Table 4's mean radius, as the pellet bed's radii
     a = 2.0 * r0 * (1.0 - squeeze) * math.sqrt(2.0)  # cubic cell edge
     m = max(1, round((n / 4) ** (1 / 3)))
     nz = int(math.ceil(n / (4 * m * m)))

@@ -25,8 +25,8 @@ bench_bonds.py; their bonded/unbonded times per step are printed before the engi
 the compacted pellet with every contact and the nearest gaps bonded (bond CN ~10), and a
 squeezed lattice whose contacts alone have CN ~11, every contact bonded. The last lines are
 the figures: particle-steps per second, ratios against LIGGGHTS per core, the 1 -> 2 thread
-speed-up and bytes per particle, each against its target. Ratios are taken against references measured in the
-same run, since the machine is shared and noisy.
+speed-up and bytes per particle, each against its target. Ratios are taken against
+references measured in the same run, since the machine is shared and noisy.
 """
 from __future__ import annotations
 
