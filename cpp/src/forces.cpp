@@ -350,6 +350,10 @@ constexpr LaneList make_lane_list() {
   return t;
 }
 constexpr LaneList kLaneList = make_lane_list();
+// Lane l's mask (all ones or all zeros) in bit l.
+PELLETDEM_INLINE unsigned lane_bits(LaneMask m) {
+  return static_cast<unsigned>((m[0] & 1) | (m[1] & 2) | (m[2] & 4) | (m[3] & 8));
+}
 // Horizontal OR of a mask (lanes all ones or all zeros), in two shuffles.
 PELLETDEM_INLINE bool lane_any(LaneMask m) {
   const LaneMask h = m | __builtin_shufflevector(m, m, 2, 3, 0, 1);
@@ -387,6 +391,7 @@ PELLETDEM_INLINE void add_loads(Load* A, const Index* gi, const Index* gj, const
 struct PairLanes {
   Lane ri, rj, delta, ai, aj, mi, mj, cap_i, cap_j, vn;
   L3 n, wi, wj, v_rel, vt;
+  LaneMask touch;  // the pair loop's touch test, to the bit
 };
 
 PELLETDEM_INLINE PairLanes pair_lanes(const Index* gi, const Index* gj, const PosRad* xr, const Motion* mo) {
@@ -397,6 +402,7 @@ PELLETDEM_INLINE PairLanes pair_lanes(const Index* gi, const Index* gj, const Po
   const L3 d{pj.c0 - pi.c0, pj.c1 - pi.c1, pj.c2 - pi.c2};
   const Lane rsum = q.ri + q.rj;
   const Lane dist2 = lane_dot(d, d);
+  q.touch = dist2 < rsum * rsum;
   Lane dist;
   for (int k = 0; k < kLanes; ++k) dist[k] = std::sqrt(dist2[k]);
   q.delta = rsum - dist;
@@ -439,14 +445,68 @@ struct BondLanes {
   L3 ft, moment;
 };
 
-// bond_one on the kLanes intact bonds g[0..] of the pairs q: their loads updated and in `out`.
-// Returns false, having changed nothing, when a bond needs the scalar path.
-PELLETDEM_INLINE bool bond_lanes(Bond* const* g, const PairLanes& q, double dt, bool damage,
-                                 BondLanes& out) {
-  const L4 run_n = load_run(g, kRunNormal), run_s = load_run(g, kRunShear), run_b = load_run(g, kRunBend);
-  const L3 np{run_n.c0, run_n.c1, run_n.c2};
-  L3 ft{run_s.c0, run_s.c1, run_s.c2};
-  L3 mt{run_b.c0, run_b.c1, run_b.c2};
+// Four bonds' state and constants, a lane each, as bond_lanes reads and writes them: from and
+// to four Bond records (transposed runs) or a BondBlock (each field one aligned vector, read
+// where it is used, so it need not stay in a register).
+class BondRecords {
+ public:
+  explicit BondRecords(Bond* const* g)
+      : g_(g), n_(load_run(g, kRunNormal)), s_(load_run(g, kRunShear)), b_(load_run(g, kRunBend)),
+        k_(load_run(g, kRunStiff)) {}
+  L3 np() const { return {n_.c0, n_.c1, n_.c2}; }
+  L3 ft() const { return {s_.c0, s_.c1, s_.c2}; }
+  L3 mt() const { return {b_.c0, b_.c1, b_.c2}; }
+  Lane fn() const { return n_.c3; }
+  Lane mn() const { return s_.c3; }
+  Lane rad() const { return b_.c3; }
+  Lane kn() const { return k_.c0; }
+  Lane kt() const { return k_.c1; }
+  Lane sc() const { return k_.c2; }
+  Lane tc() const { return k_.c3; }
+  void store(const L3& n, Lane fn, const L3& ft, Lane mn, const L3& mt) const {
+    store_run(g_, kRunNormal, n.x, n.y, n.z, fn);
+    store_run(g_, kRunShear, ft.x, ft.y, ft.z, mn);
+    store_run(g_, kRunBend, mt.x, mt.y, mt.z, b_.c3);  // the radius goes back unchanged
+  }
+
+ private:
+  Bond* const* g_;
+  L4 n_, s_, b_, k_;
+};
+
+class BondSlots {
+ public:
+  explicit BondSlots(BondBlock& k) : k_(k) {}
+  L3 np() const { return {F(B::NX), F(B::NY), F(B::NZ)}; }
+  L3 ft() const { return {F(B::FTX), F(B::FTY), F(B::FTZ)}; }
+  L3 mt() const { return {F(B::MTX), F(B::MTY), F(B::MTZ)}; }
+  Lane fn() const { return F(B::FN); }
+  Lane mn() const { return F(B::MN); }
+  Lane rad() const { return F(B::RADIUS); }
+  Lane kn() const { return F(B::KN); }
+  Lane kt() const { return F(B::KT); }
+  Lane sc() const { return F(B::SIGMA_C); }
+  Lane tc() const { return F(B::TAU_C); }
+  void store(const L3& n, Lane fn, const L3& ft, Lane mn, const L3& mt) const {
+    W(B::NX, n.x), W(B::NY, n.y), W(B::NZ, n.z), W(B::FN, fn);
+    W(B::FTX, ft.x), W(B::FTY, ft.y), W(B::FTZ, ft.z), W(B::MN, mn);
+    W(B::MTX, mt.x), W(B::MTY, mt.y), W(B::MTZ, mt.z);
+  }
+
+ private:
+  using B = BondBlock;
+  Lane F(int f) const { return *reinterpret_cast<const Lane*>(k_.f[f]); }
+  void W(int f, Lane v) const { *reinterpret_cast<Lane*>(k_.f[f]) = v; }
+  BondBlock& k_;
+};
+
+// bond_one on four intact bonds b (BondRecords or BondSlots; capacity left `left`: 1 - damage)
+// of the pairs q: their new state stored in b and their loads in `out`. Returns false, having
+// changed nothing, when a bond needs the scalar path.
+template <class Bonds>
+PELLETDEM_INLINE bool bond_lanes(const Bonds& b, const PairLanes& q, double dt, Lane left, BondLanes& out) {
+  const L3 np = b.np();
+  L3 ft = b.ft(), mt = b.mt();
   const L3& n = q.n;
   // Tilt of the normal (see bond_one); a reversal (c <= -0.5) goes to the scalar path.
   const Lane c = lane_dot(np, n);
@@ -476,9 +536,8 @@ PELLETDEM_INLINE bool bond_lanes(Bond* const* g, const PairLanes& q, double dt, 
   const L3 w_rel{wj.x - wi.x, wj.y - wi.y, wj.z - wi.z};
   const Lane wn = lane_dot(w_rel, n);
   const L3 wt{w_rel.x - wn * n.x, w_rel.y - wn * n.y, w_rel.z - wn * n.z};
-  const L4 run_k = load_run(g, kRunStiff);
-  const Lane rad = run_b.c3, kn = run_k.c0, kt = run_k.c1;
-  Lane fn = run_n.c3, mn = run_s.c3;
+  const Lane rad = b.rad(), kn = b.kn(), kt = b.kt();
+  Lane fn = b.fn(), mn = b.mn();
   const Lane area = kPi * rad * rad;
   const Lane jpolar = 0.5 * kPi * rad * rad * rad * rad;
   const Lane kna = kn * area * dt, kta = kt * area * dt;
@@ -488,10 +547,7 @@ PELLETDEM_INLINE bool bond_lanes(Bond* const* g, const PairLanes& q, double dt, 
   ft = {ft.x - kta * q.vt.x, ft.y - kta * q.vt.y, ft.z - kta * q.vt.z};
   mt = {mt.x - kni * wt.x, mt.y - kni * wt.y, mt.z - kni * wt.z};
   // Strength bounds of bond_one; a group with a bond past them is redone bond by bond.
-  const Lane sc = run_k.c2, tc = run_k.c3;
-  // Capacity left: 1 - damage, exactly 1 where no bond softens (`damage` false).
-  const Lane left = damage ? 1.0 - gather([&](int k) { return g[k]->damage; }) : Lane{} + 1.0;
-  const Lane fs = left * sc * area, ts = left * tc * area;
+  const Lane fs = left * b.sc() * area, ts = left * b.tc() * area;
   // The bounds times r_b (r_b > 0), which spares a division. This only picks the path: a group
   // within rounding of a bound is redone by bond_one, whose own test then decides.
   const Lane sig_bound = -fn * rad + 4.0 * ((lane_abs(mt.x) + lane_abs(mt.y)) + lane_abs(mt.z));
@@ -501,10 +557,15 @@ PELLETDEM_INLINE bool bond_lanes(Bond* const* g, const PairLanes& q, double dt, 
   out.fn = fn;
   out.ft = ft;
   out.moment = {mn * n.x + mt.x, mn * n.y + mt.y, mn * n.z + mt.z};
-  store_run(g, kRunNormal, n.x, n.y, n.z, fn);
-  store_run(g, kRunShear, ft.x, ft.y, ft.z, mn);
-  store_run(g, kRunBend, mt.x, mt.y, mt.z, rad);  // the radius goes back unchanged
+  b.store(n, fn, ft, mn, mt);
   return true;
+}
+
+// The capacity left, 1 - damage, of bonds[id[0..3]]: exactly 1 where no bond softens (`damage`
+// false).
+template <class Id>
+PELLETDEM_INLINE Lane bonds_left(bool damage, Id&& id) {
+  return damage ? 1.0 - gather([&](int k) { return id(k).damage; }) : Lane{} + 1.0;
 }
 
 // update_bond on kLanes intact bonds whose pairs are not in the neighbour list, in bond order.
@@ -518,7 +579,8 @@ PELLETDEM_INLINE bool update_bond_group(Bond* const* g, const PosRad* xr, const 
   }
   const PairLanes q = pair_lanes(bi, bj, xr, mo);
   BondLanes bl;
-  if (!bond_lanes(g, q, dt, damage, bl)) return false;
+  if (!bond_lanes(BondRecords(g), q, dt, bonds_left(damage, [&](int k) -> const Bond& { return *g[k]; }), bl))
+    return false;
   add_pair_loads(A, bi, bj, q, bl.fn, bl.ft, bl.moment);
   return true;
 }
@@ -570,14 +632,15 @@ PELLETDEM_INLINE void contact_one(Index i, Index j, ContactHistory& h, const Par
   A[j].roll += rolling_moment(cp.rolling, cf.fn, p.r[j], mo[j].roll_cap);
 }
 
-// A touching bonded pair (i, j): its contact force and its bond b, added to A together.
-// Returns true when the bond broke (its share is then left out).
-PELLETDEM_INLINE bool bonded_one(Index i, Index j, ContactHistory& h, Bond& b, const Particles& p,
+// A bonded pair (i, j): its contact force where it touches (`on`) and its bond b, added to A
+// together. Returns true when the bond broke (its share is then left out).
+PELLETDEM_INLINE bool bonded_one(Index i, Index j, bool on, ContactHistory& h, Bond& b, const Particles& p,
                                  const HystereticLaw& law, const ContactLawParams& cp,
                                  double dt_inc, double adh, const Motion* mo, Load* A,
                                  PairStats& out) {
   const PairGeometry g = pair_geometry(i, j, p, mo);
-  const ContactForce cf = contact_force(i, j, h, g, p, law, cp, dt_inc, adh, out);
+  const ContactForce cf = on ? contact_force(i, j, h, g, p, law, cp, dt_inc, adh, out)
+                             : ContactForce{0.0, Vec3::Zero()};
   BondLoad bl;
   const bool broke = bond_one(b, g, dt_inc, bl);
   if (broke) bl = BondLoad{0.0, Vec3::Zero(), Vec3::Zero()};
@@ -696,26 +759,39 @@ PELLETDEM_INLINE void contact_group(const Index* gi, const Index* gj, ContactHis
   note_overlap(out, q.delta, q.ri, q.rj, gi, gj);
 }
 
-// Four touching bonded pairs, one per lane, as bonded_one: the contact and the bond share the
-// pair's kinematics and one load and store per particle. Returns false, having changed
-// nothing, when a bond needs the scalar path.
+// Four bonded pairs, one per lane, whose bonds are the four slots of block `k`, as bonded_one:
+// the contact (where the pair touches) and the bond share the pair's kinematics and one load
+// and store per particle. `left`: the bonds' capacity left (bonds_left). Returns false,
+// having changed nothing, when a bond needs the scalar path.
 PELLETDEM_INLINE bool bonded_group(const Index* gi, const Index* gj, ContactHistory* const* gh,
-                                   Bond* const* gb, const PosRad* xr, const Motion* mo,
+                                   BondBlock& k, Lane left, const PosRad* xr, const Motion* mo,
                                    const HystereticLaw& law, const ContactLawParams& cp,
-                                   double dt_inc, double adh, bool damage, Load* A,
-                                   PairStats& out) {
+                                   double dt_inc, double adh, Load* A, PairStats& out) {
   const PairLanes q = pair_lanes(gi, gj, xr, mo);
   BondLanes bl;
-  if (!bond_lanes(gb, q, dt_inc, damage, bl)) return false;
-  const L4 hist = load_run(gh, 0);
-  Lane fn, delta0;
-  L3 ft, hft;
-  contact_law_lanes(q, hist, law, cp, dt_inc, adh, fn, ft, delta0, hft);
-  store_run(gh, 0, delta0, hft.x, hft.y, hft.z);
+  if (!bond_lanes(BondSlots(k), q, dt_inc, left, bl)) return false;
+  const LaneMask on = q.touch;
+  const unsigned touching = lane_bits(on);
+  Lane fn{};
+  L3 ft{Lane{}, Lane{}, Lane{}};
+  if (touching) {
+    const L4 hist = load_run(gh, 0);
+    Lane delta0;
+    L3 hft;
+    contact_law_lanes(q, hist, law, cp, dt_inc, adh, fn, ft, delta0, hft);
+    if (touching != (1u << kLanes) - 1) {
+      // A pair apart has no contact force, and keeps its (cleared) history.
+      fn = lane_select(on, fn, Lane{});
+      ft = lane_select(on, ft, L3{Lane{}, Lane{}, Lane{}});
+      delta0 = lane_select(on, delta0, hist.c0);
+      hft = lane_select(on, hft, L3{hist.c1, hist.c2, hist.c3});
+    }
+    store_run(gh, 0, delta0, hft.x, hft.y, hft.z);
+  }
   // The contact's and the bond's normal and tangential forces act at the same point.
   add_pair_loads(A, gi, gj, q, fn + bl.fn, L3{ft.x + bl.ft.x, ft.y + bl.ft.y, ft.z + bl.ft.z}, bl.moment,
                  roll_lanes(cp, fn, q.ri, q.cap_i), roll_lanes(cp, fn, q.rj, q.cap_j));
-  out.contacts += kLanes;
+  out.contacts += __builtin_popcount(touching);
   note_overlap(out, q.delta, q.ri, q.rj, gi, gj);
   return true;
 }
@@ -723,13 +799,15 @@ PELLETDEM_INLINE bool bonded_group(const Index* gi, const Index* gj, ContactHist
 
 }  // namespace
 
-// The bonded pairs of the neighbour list (NeighborList::kLiveBonded in `live`): the bonds,
-// the bond of each pair (read only where that bit is set), and where a thread notes the bonds
-// that broke. bonds == nullptr: the world has no bonds. damage: some bond may be softening
+// The bonded pairs of the neighbour list (NeighborList::kLiveBonded in `live`): the bonds, the
+// slots that hold their state (World::map_bonds), the slot of each pair (read only where that
+// bit is set) and the bond of each slot, and where a thread notes the bonds that broke. bonds == nullptr: the world has no bonds. damage: some bond may be softening
 // (BondParams::softening), so its capacity is below its strength.
 struct BondedPairs {
   Bond* bonds = nullptr;
-  const Index* bond_of = nullptr;
+  BondBlock* slots = nullptr;
+  const Index* slot_of = nullptr;    // per listed pair (World::pair_slot_)
+  const Index* slot_bond = nullptr;  // per slot
   std::vector<long>* broke = nullptr;
   bool damage = false;
 };
@@ -741,11 +819,13 @@ namespace {
 // bonded pair whether it touches or not, added to A; the history of pairs that came apart is
 // cleared. The touch test runs four pairs at a time on the packed positions and radii (one
 // aligned load per particle). Pairs queue up by kind and leave four at a time: touching
-// unbonded pairs through contact_group where the law allows (else contact_one), touching bonded
-// pairs through bonded_group (else bonded_one), which shares the pair's kinematics and its one
-// load and store per particle between the contact and the bond, and bonded pairs that do not
-// touch through update_bond_group (else update_bond). The scalar kernels take the pairs in the
-// same order as the lanes, so the forces add up in the same order either way.
+// unbonded pairs through contact_group where the law allows (else contact_one), and bonded
+// pairs, touching or not, in list order and so in slot order: four whose bonds fill one slot
+// block through bonded_group, which shares the pair's kinematics and its one load and store per
+// particle between the contact and the bond and reads and writes the block with plain vector
+// loads and stores; any other (the first few of a thread's run, the partners of a bond that
+// broke since the list was built) one at a time through bonded_one. The scalar kernels take
+// the pairs in the same order as the lanes, so the forces add up in the same order either way.
 template <bool kBonded>
 PELLETDEM_INLINE PairStats pair_loop_body(long lo, long hi, const Particles& p, const PosRad* xr,
                                           NeighborList& nbr, const HystereticLaw& law,
@@ -758,7 +838,8 @@ PELLETDEM_INLINE PairStats pair_loop_body(long lo, long hi, const Particles& p, 
   const Index* J = nbr.j.data();
   ContactHistory* H = nbr.history.data();
   std::uint8_t* live = nbr.live.data();
-  constexpr std::uint8_t kTouch = NeighborList::kLiveTouch, kBond = NeighborList::kLiveBonded;
+  constexpr std::uint8_t kTouch = NeighborList::kLiveTouch, kBond = NeighborList::kLiveBond,
+                         kApart = NeighborList::kLiveBondApart;
   // The test written out as the four-lane one does it, so both paths see the same pairs touch.
   auto touching = [&](Index k) {
     const PosRad &a = xr[I[k]], &b = xr[J[k]];
@@ -773,11 +854,15 @@ PELLETDEM_INLINE PairStats pair_loop_body(long lo, long hi, const Particles& p, 
   auto one = [&](Index k) {
     contact_one(I[k], J[k], H[k], p, law, cp, dt_inc, adh, mo, A, out);
   };
-  // A bonded pair, touching or not; a bond that broke is noted and its pair is no longer bonded.
-  auto bonded = [&](Index k, bool on) {
-    const Index b = bp.bond_of[k];
-    const bool broke = on ? bonded_one(I[k], J[k], H[k], bp.bonds[b], p, law, cp, dt_inc, adh, mo, A, out)
-                          : update_bond(bp.bonds[b], p, mo, dt_inc, A);
+  // A bonded pair, touching or not, its bond's state taken from its slot and put back; a bond
+  // that broke is noted (its record then holds its last state) and its pair is no longer bonded.
+  auto bonded = [&](Index k) {
+    const Index s = bp.slot_of[k];
+    const Index b = bp.slot_bond[s];
+    Bond& bond = bp.bonds[b];
+    load_slot(bp.slots, s, bond);
+    const bool broke = bonded_one(I[k], J[k], touching(k), H[k], bond, p, law, cp, dt_inc, adh, mo, A, out);
+    store_slot(bp.slots, s, bond);
     if (broke) {
       bp.broke->push_back(b);
       live[k] &= static_cast<std::uint8_t>(~kBond);
@@ -786,9 +871,10 @@ PELLETDEM_INLINE PairStats pair_loop_body(long lo, long hi, const Particles& p, 
 #ifdef PELLETDEM_LANES
   const bool lanes = vector_kernel && law.plain_pairs();
   if (kBonded || lanes) {
-    // Queues: touching unbonded pairs (q[0]), touching bonded (q[1]), bonded apart (q[2]).
-    // The test appends without a branch. Each group kernel is written out at one place:
-    // inlined at several, the loop outgrew the instruction cache and ran at half speed.
+    // Queues: touching unbonded pairs (q[0]), bonded pairs in the slots of pairs that touched
+    // (q[1]) and of pairs that were apart (q[2]) when the bonds were mapped. The test appends
+    // without a branch. Each group kernel is written out at one place: inlined at several, the
+    // loop outgrew the instruction cache and ran at half speed.
     constexpr int kQueues = kBonded ? 3 : 1;
     Index q[kQueues][2 * kLanes];
     int nq[kQueues] = {};
@@ -819,14 +905,16 @@ PELLETDEM_INLINE PairStats pair_loop_body(long lo, long hi, const Particles& p, 
           std::memcpy(&was, live + k, sizeof was);
           // Lane l's touch in bit l, and in bit 0 of byte l (multiplying spreads the four bits
           // to the four bytes without carries).
-          const unsigned touch = static_cast<unsigned>((on[0] & 1) | (on[1] & 2) | (on[2] & 4) | (on[3] & 8));
+          const unsigned touch = lane_bits(on);
           const std::uint32_t on_bytes = (touch * 0x00204081u) & 0x01010101u;
           if constexpr (kBonded) {
-            // Bit 1 of byte l to bit l (the multiply gathers the bytes' bits into the top byte).
-            const unsigned bond = (((was >> 1) & 0x01010101u) * 0x01020408u) >> 24;
-            append(0, touch & ~bond);
-            append(1, touch & bond);
-            append(2, ~touch & bond & 0xFu);
+            // Bits 1 and 2 of byte l to bit l (the multiply gathers the bytes' bits into the top
+            // byte).
+            const unsigned bonded_t = (((was >> 1) & 0x01010101u) * 0x01020408u) >> 24;
+            const unsigned bonded_a = (((was >> 2) & 0x01010101u) * 0x01020408u) >> 24;
+            append(0, touch & ~(bonded_t | bonded_a));
+            append(1, bonded_t);
+            append(2, bonded_a);
           } else {
             append(0, touch);
           }
@@ -842,7 +930,7 @@ PELLETDEM_INLINE PairStats pair_loop_body(long lo, long hi, const Particles& p, 
           k += kLanes;
         } else {
           const bool on = touching(k);
-          const int c = (kBonded && (live[k] & kBond)) ? (on ? 1 : 2) : 0;
+          const int c = (kBonded && (live[k] & kBond)) ? ((live[k] & kApart) ? 2 : 1) : 0;
           q[c][nq[c]] = k;
           nq[c] += (c > 0 || on);
           settle(k, on);
@@ -855,29 +943,37 @@ PELLETDEM_INLINE PairStats pair_loop_body(long lo, long hi, const Particles& p, 
       const Index* e = q[c];
       Index gi[kLanes], gj[kLanes];
       ContactHistory* gh[kLanes];
-      Bond* gb[kLanes];
       for (int l = 0; l < kLanes; ++l) {
         gi[l] = I[e[l]];
         gj[l] = J[e[l]];
         gh[l] = H + e[l];
-        if (kBonded && c > 0) gb[l] = bp.bonds + bp.bond_of[e[l]];
       }
+      int used = kLanes;
       if (c == 0) {
         if (lanes) contact_group(gi, gj, gh, xr, mo, law, cp, dt_inc, adh, A, out);
         else for (int l = 0; l < kLanes; ++l) one(e[l]);
-      } else if (c == 1) {
-        if (!lanes || !bonded_group(gi, gj, gh, gb, xr, mo, law, cp, dt_inc, adh, bp.damage, A, out))
-          for (int l = 0; l < kLanes; ++l) bonded(e[l], true);
-      } else {
-        if (!vector_kernel || !update_bond_group(gb, xr, mo, dt_inc, bp.damage, A))
-          for (int l = 0; l < kLanes; ++l) bonded(e[l], false);
+      } else if constexpr (kBonded) {
+        // Four pairs whose bonds fill one block go together; otherwise the first goes alone.
+        // A queue's slots rise with the list (map_bonds numbers each run in list order), so
+        // the first and the last tell.
+        const Index s0 = bp.slot_of[e[0]];
+        const bool block = (s0 & (kLanes - 1)) == 0 && bp.slot_of[e[kLanes - 1]] == s0 + kLanes - 1;
+        if (!block) {
+          bonded(e[0]);
+          used = 1;
+        } else {
+          const Lane left = bonds_left(bp.damage, [&](int l) -> const Bond& { return bp.bonds[bp.slot_bond[s0 + l]]; });
+          if (!lanes || !bonded_group(gi, gj, gh, bp.slots[s0 / kLanes], left, xr, mo, law, cp, dt_inc, adh, A, out))
+            for (int l = 0; l < kLanes; ++l) bonded(e[l]);
+        }
       }
-      for (int l = kLanes; l < nq[c]; ++l) q[c][l - kLanes] = q[c][l];
-      nq[c] -= kLanes;
+      for (int l = used; l < nq[c]; ++l) q[c][l - used] = q[c][l];
+      nq[c] -= used;
     }
     for (int l = 0; l < nq[0]; ++l) one(q[0][l]);
-    for (int c = 1; c < kQueues; ++c)
-      for (int l = 0; l < nq[c]; ++l) bonded(q[c][l], c == 1);
+    if constexpr (kBonded)
+      for (int c = 1; c < kQueues; ++c)
+        for (int l = 0; l < nq[c]; ++l) bonded(q[c][l]);
     return out;
   }
 #endif
@@ -886,7 +982,7 @@ PELLETDEM_INLINE PairStats pair_loop_body(long lo, long hi, const Particles& p, 
     const bool on = touching(k);
     if (kBonded && (live[k] & kBond)) {
       settle(k, on);
-      bonded(k, on);
+      bonded(k);
     } else {
       if (on) one(k);
       settle(k, on);
@@ -1052,7 +1148,7 @@ void World::compute_forces(bool advance, Finish finish) {
             ? pair_loop_plain(lo, hi, p_, xr_.data(), nbr_, law_, cp, dt_inc, adh, mo_.data(), A,
                               vector_kernels_)
             : pair_loop_bonded(lo, hi, p_, xr_.data(), nbr_, law_, cp, dt_inc, adh, mo_.data(), A,
-                               vector_kernels_, BondedPairs{bonds_.data(), pair_bond_.data(), &broke_t[tid], bonds_soften_});
+                               vector_kernels_, BondedPairs{bonds_.data(), slots_.data(), pair_slot_.data(), slot_bond_.data(), &broke_t[tid], bonds_soften_});
     // A thread's orphan bonds add to its own buffers, so it goes on to them without waiting
     // for the others' pairs; the reduction below waits for all.
     if (n_orphans > 0)

@@ -33,6 +33,7 @@ WorldState World::save_state() const {
   s.walls = walls_;
   for (int k = 0; k < wall_count(); ++k)
     if (walls_[k].load_wall) s.load_walls.push_back(k);
+  flush_slots();
   s.bonds = bonds_;
   s.broken = broken_;
   return s;
@@ -79,6 +80,7 @@ void World::load_state(const WorldState& s) {
     walls_[k].load_wall = true;
   }
   bonds_ = s.bonds;
+  slots_live_ = false;  // the slots held the replaced bonds
   bond_map_generation_ = -1;
   // The bonds' increments were last taken at the saved step (a state dict does not carry it).
   broken_ = s.broken;

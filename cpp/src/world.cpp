@@ -522,7 +522,7 @@ double World::potential_energy() const {
       if (gap < 0.0) e += law_.stored_energy(-gap, wc.h, p_.r[wc.i], true);
     }
   }
-  for (const Bond& b : bonds_) {
+  for (const Bond& b : bonds()) {  // flushed: the slots hold their state
     if (b.mode != BondMode::Intact) continue;
     const double a = b.area(), jp = b.polar_moment();
     e += 0.5 * b.fn * b.fn / (b.kn * a);
@@ -618,13 +618,23 @@ long World::create_bonds(const BondParams& bp) {
   return created;
 }
 
+void World::flush_slots() const {
+  if (!slots_live_) return;
+  for (std::size_t s = 0; s < slot_bond_.size(); ++s) {
+    if (slot_bond_[s] == kNoBond) continue;
+    Bond& b = bonds_[slot_bond_[s]];
+    if (b.mode == BondMode::Intact) load_slot(slots_.data(), s, b);
+  }
+}
+
 void World::map_bonds() {
-  pair_bond_.assign(nbr_.pair_count(), 0);
+  flush_slots();
+  pair_slot_.assign(nbr_.pair_count(), 0);
   orphans_.clear();
   bonds_soften_ = false;
   std::uint8_t* live = nbr_.live.data();
   for (std::size_t k = 0; k < nbr_.pair_count(); ++k)
-    live[k] &= static_cast<std::uint8_t>(~NeighborList::kLiveBonded);
+    live[k] &= static_cast<std::uint8_t>(~NeighborList::kLiveBond);
   for (std::size_t b = 0; b < bonds_.size(); ++b) {
     const Bond& bond = bonds_[b];
     if (bond.mode != BondMode::Intact) continue;
@@ -638,12 +648,39 @@ void World::map_bonds() {
       if (it != last && *it == bond.j) {
         const std::size_t k = static_cast<std::size_t>(it - nbr_.j.begin());
         live[k] |= NeighborList::kLiveBonded;
-        pair_bond_[k] = static_cast<Index>(b);
+        pair_slot_[k] = static_cast<Index>(b);  // the bond for now; its slot below
         listed = true;
       }
     }
     if (!listed) orphans_.push_back(static_cast<Index>(b));
   }
+  // Slots in list order, so that the pair loop meets them four by four: first the pairs that
+  // touch now (the pair loop's test, to the bit), then, from the next block on, those apart,
+  // which go through the pair loop in a queue of their own and skip the contact law while all
+  // four of a group stay apart.
+  slot_bond_.clear();
+  std::size_t first_apart = 0;
+  for (int apart = 0; apart < 2; ++apart) {
+    while (slot_bond_.size() % 4) slot_bond_.push_back(kNoBond);
+    if (apart) first_apart = slot_bond_.size();
+    for (std::size_t k = 0; k < nbr_.pair_count(); ++k) {
+      if (!(live[k] & NeighborList::kLiveBonded)) continue;
+      const Index i = nbr_.first[k], j = nbr_.j[k];
+      const double dx = p_.x[j].x() - p_.x[i].x(), dy = p_.x[j].y() - p_.x[i].y(),
+                   dz = p_.x[j].z() - p_.x[i].z(), rsum = p_.r[i] + p_.r[j];
+      const bool touch = (dx * dx + dy * dy) + dz * dz < rsum * rsum;
+      if (touch == (apart == 1)) continue;
+      slot_bond_.push_back(pair_slot_[k]);
+      pair_slot_[k] = static_cast<Index>(slot_bond_.size() - 1);
+    }
+  }
+  for (std::size_t k = 0; k < nbr_.pair_count(); ++k)
+    if ((live[k] & NeighborList::kLiveBonded) && static_cast<std::size_t>(pair_slot_[k]) >= first_apart)
+      live[k] ^= NeighborList::kLiveBond;  // kLiveBonded -> kLiveBondApart
+  slots_.assign((slot_bond_.size() + 3) / 4, BondBlock{});
+  for (std::size_t s = 0; s < slot_bond_.size(); ++s)
+    if (slot_bond_[s] != kNoBond) store_slot(slots_.data(), s, bonds_[slot_bond_[s]]);
+  slots_live_ = true;
   bond_map_generation_ = nbr_.generation;
 }
 

@@ -3,6 +3,7 @@
 // incremental force and moment, stored in the bond's frame which turns with the pair, so a
 // rigid rotation of a bonded pair creates no force. Bonds live in their own list, apart from
 // the contact table: they persist until they break, however far the pair moves apart.
+#include <cstddef>
 #include <cstdint>
 #include <vector>
 
@@ -62,6 +63,44 @@ struct Bond {
   double sigma_max() const { return -fn / area() + 2.0 * mt.norm() * radius / polar_moment(); }
   double tau_max() const { return ft.norm() / area() + std::abs(mn) * radius / polar_moment(); }
 };
+
+// Four bonds' loading state and constants, one bond per lane, as the pair loop keeps the bonds
+// whose pairs are in the neighbour list (World::map_bonds puts them in "slots", in list order,
+// four to a block). A group of four bonded pairs then reads and writes its bonds with one
+// aligned vector load or store per field: gathered from four Bond records and transposed it
+// cost a quarter more of the bonds' time per step (docs/performance in the README).
+struct alignas(64) BondBlock {
+  enum Field { NX, NY, NZ, FN, FTX, FTY, FTZ, MN, MTX, MTY, MTZ, RADIUS, KN, KT, SIGMA_C, TAU_C, kFields };
+  double f[kFields][4];
+};
+
+// A slot that holds no bond (the padding before a run of slots starts a block).
+constexpr Index kNoBond = ~Index{0};
+
+// Slot s of `blocks` (block s / 4, lane s % 4) to and from a Bond's fields of the same names.
+inline void load_slot(const BondBlock* blocks, std::size_t s, Bond& b) {
+  const BondBlock& k = blocks[s / 4];
+  const std::size_t l = s % 4;
+  b.n_prev = Vec3(k.f[BondBlock::NX][l], k.f[BondBlock::NY][l], k.f[BondBlock::NZ][l]);
+  b.fn = k.f[BondBlock::FN][l];
+  b.ft = Vec3(k.f[BondBlock::FTX][l], k.f[BondBlock::FTY][l], k.f[BondBlock::FTZ][l]);
+  b.mn = k.f[BondBlock::MN][l];
+  b.mt = Vec3(k.f[BondBlock::MTX][l], k.f[BondBlock::MTY][l], k.f[BondBlock::MTZ][l]);
+  b.radius = k.f[BondBlock::RADIUS][l];
+  b.kn = k.f[BondBlock::KN][l];
+  b.kt = k.f[BondBlock::KT][l];
+  b.sigma_c = k.f[BondBlock::SIGMA_C][l];
+  b.tau_c = k.f[BondBlock::TAU_C][l];
+}
+inline void store_slot(BondBlock* blocks, std::size_t s, const Bond& b) {
+  BondBlock& k = blocks[s / 4];
+  const std::size_t l = s % 4;
+  const double v[BondBlock::kFields] = {b.n_prev.x(), b.n_prev.y(), b.n_prev.z(), b.fn,
+                                        b.ft.x(), b.ft.y(), b.ft.z(), b.mn,
+                                        b.mt.x(), b.mt.y(), b.mt.z(), b.radius,
+                                        b.kn, b.kt, b.sigma_c, b.tau_c};
+  for (int f = 0; f < BondBlock::kFields; ++f) k.f[f][l] = v[f];
+}
 
 struct BrokenBond {
   double time;     // s

@@ -29,9 +29,11 @@ class NeighborList {
   // Per pair, bit kLiveTouch: the history may be non-zero (the pair touched at the last force
   // pass). The pair loop clears the history of pairs that came apart; with this flag it reads
   // one byte of a pair that does not touch instead of its 32-byte history, without a branch.
-  // Bit kLiveBonded: the pair has an intact bond (set by World::map_bonds).
+  // Bits kLiveBonded and kLiveBondApart: the pair has an intact bond (set by World::map_bonds),
+  // in the run of slots of pairs that touched, or of pairs that were apart, when it was set.
   std::vector<std::uint8_t> live;
-  static constexpr std::uint8_t kLiveTouch = 1, kLiveBonded = 2;
+  static constexpr std::uint8_t kLiveTouch = 1, kLiveBonded = 2, kLiveBondApart = 4;
+  static constexpr std::uint8_t kLiveBond = kLiveBonded | kLiveBondApart;
   // Counts the builds and mark_live calls: whatever maps onto the pairs is stale when it changes.
   long generation = 0;
 

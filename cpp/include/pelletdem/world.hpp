@@ -97,8 +97,17 @@ class World {
   // Bonds every pair whose surfaces are closer than params.gap_tolerance (touching pairs when
   // 0), stress-free now. Returns the number created.
   long create_bonds(const BondParams& params);
-  const std::vector<Bond>& bonds() const { return bonds_; }
-  std::vector<Bond>& bonds_mut() { return bonds_; }
+  const std::vector<Bond>& bonds() const {
+    flush_slots();
+    return bonds_;
+  }
+  // For changing bonds' constants: the slots are rebuilt from the records before the next step.
+  std::vector<Bond>& bonds_mut() {
+    flush_slots();
+    slots_live_ = false;
+    bond_map_generation_ = -1;
+    return bonds_;
+  }
   const std::vector<BrokenBond>& broken_bonds() const { return broken_; }
   long intact_bond_count() const;
 
@@ -213,12 +222,22 @@ class World {
   // Particles [lo, hi) whose Load records thread t > 0 zeroed and filled in the last force
   // pass, as (lo, hi) pairs per thread (thread 0's buffer covers every particle).
   std::vector<long> load_range_;
-  // Marks the neighbour-list pairs that have an intact bond (NeighborList::kLiveBonded, their
-  // bond in pair_bond_): the pair loop updates those bonds with their contacts. Intact bonds
-  // whose pair is not in the list go to orphans_. Done when the list changed since the last
-  // time (bond_map_generation_ != nbr_.generation).
+  // Marks the neighbour-list pairs that have an intact bond (NeighborList::kLiveBonded) and
+  // moves those bonds' state into slots_, in list order (pair k's slot in pair_slot_, slot s's
+  // bond in slot_bond_): the pair loop updates them with their contacts, four consecutive
+  // slots at a time. Intact bonds whose pair is not in the list go to orphans_ and stay in
+  // their records. Done when the list changed since the last time (bond_map_generation_ !=
+  // nbr_.generation), after flushing the slots back.
   void map_bonds();
-  std::vector<Index> pair_bond_;
+  // While slots_live_, the slotted bonds' state (BondBlock's fields) is in slots_ and their
+  // records' copies may be stale; this writes them back (intact bonds only: a bond that broke
+  // was last written to its record), and the slots stay in use. Every reader of bonds_ outside
+  // the force pass calls it.
+  void flush_slots() const;
+  std::vector<Index> pair_slot_;
+  std::vector<Index> slot_bond_;
+  mutable std::vector<BondBlock> slots_;
+  mutable bool slots_live_ = false;
   std::vector<Index> orphans_;
   long bond_map_generation_ = -1;
   bool bonds_soften_ = false;  // some intact bond softens or is damaged (map_bonds)
@@ -235,7 +254,7 @@ class World {
   Particles p_;
   NeighborList nbr_;
   std::vector<Wall> walls_;
-  std::vector<Bond> bonds_;
+  mutable std::vector<Bond> bonds_;  // mutable for flush_slots
   std::vector<BrokenBond> broken_;
   std::vector<Vec3> x_build_;
   std::vector<std::vector<Load>> loads_;  // per thread: its share of the forces (Load)
