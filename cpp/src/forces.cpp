@@ -459,10 +459,15 @@ class BondRecords {
   Lane fn() const { return n_.c3; }
   Lane mn() const { return s_.c3; }
   Lane rad() const { return b_.c3; }
-  Lane kn() const { return k_.c0; }
-  Lane kt() const { return k_.c1; }
-  Lane sc() const { return k_.c2; }
-  Lane tc() const { return k_.c3; }
+  // BondBlock's constants, as store_slot computes them.
+  Lane area() const { return kPi * b_.c3 * b_.c3; }
+  Lane jpolar() const { return 0.5 * kPi * b_.c3 * b_.c3 * b_.c3 * b_.c3; }
+  Lane kn_a() const { return k_.c0 * area(); }
+  Lane kt_a() const { return k_.c1 * area(); }
+  Lane kt_j() const { return k_.c1 * jpolar(); }
+  Lane kn_half_j() const { return k_.c0 * 0.5 * jpolar(); }
+  Lane sigma_ar() const { return k_.c2 * area() * b_.c3; }
+  Lane tau_ar() const { return k_.c3 * area() * b_.c3; }
   void store(const L3& n, Lane fn, const L3& ft, Lane mn, const L3& mt) const {
     store_run(g_, kRunNormal, n.x, n.y, n.z, fn);
     store_run(g_, kRunShear, ft.x, ft.y, ft.z, mn);
@@ -483,10 +488,12 @@ class BondSlots {
   Lane fn() const { return F(B::FN); }
   Lane mn() const { return F(B::MN); }
   Lane rad() const { return F(B::RADIUS); }
-  Lane kn() const { return F(B::KN); }
-  Lane kt() const { return F(B::KT); }
-  Lane sc() const { return F(B::SIGMA_C); }
-  Lane tc() const { return F(B::TAU_C); }
+  Lane kn_a() const { return F(B::KN_A); }
+  Lane kt_a() const { return F(B::KT_A); }
+  Lane kt_j() const { return F(B::KT_J); }
+  Lane kn_half_j() const { return F(B::KN_HALF_J); }
+  Lane sigma_ar() const { return F(B::SIGMA_AR); }
+  Lane tau_ar() const { return F(B::TAU_AR); }
   void store(const L3& n, Lane fn, const L3& ft, Lane mn, const L3& mt) const {
     W(B::NX, n.x), W(B::NY, n.y), W(B::NZ, n.z), W(B::FN, fn);
     W(B::FTX, ft.x), W(B::FTY, ft.y), W(B::FTZ, ft.z), W(B::MN, mn);
@@ -536,23 +543,20 @@ PELLETDEM_INLINE bool bond_lanes(const Bonds& b, const PairLanes& q, double dt, 
   const L3 w_rel{wj.x - wi.x, wj.y - wi.y, wj.z - wi.z};
   const Lane wn = lane_dot(w_rel, n);
   const L3 wt{w_rel.x - wn * n.x, w_rel.y - wn * n.y, w_rel.z - wn * n.z};
-  const Lane rad = b.rad(), kn = b.kn(), kt = b.kt();
+  const Lane rad = b.rad();
   Lane fn = b.fn(), mn = b.mn();
-  const Lane area = kPi * rad * rad;
-  const Lane jpolar = 0.5 * kPi * rad * rad * rad * rad;
-  const Lane kna = kn * area * dt, kta = kt * area * dt;
-  const Lane ktj = kt * jpolar * dt, kni = kn * 0.5 * jpolar * dt;
+  const Lane kna = b.kn_a() * dt, kta = b.kt_a() * dt;
+  const Lane ktj = b.kt_j() * dt, kni = b.kn_half_j() * dt;
   fn -= kna * q.vn;
   mn -= ktj * wn;
   ft = {ft.x - kta * q.vt.x, ft.y - kta * q.vt.y, ft.z - kta * q.vt.z};
   mt = {mt.x - kni * wt.x, mt.y - kni * wt.y, mt.z - kni * wt.z};
   // Strength bounds of bond_one; a group with a bond past them is redone bond by bond.
-  const Lane fs = left * b.sc() * area, ts = left * b.tc() * area;
   // The bounds times r_b (r_b > 0), which spares a division. This only picks the path: a group
   // within rounding of a bound is redone by bond_one, whose own test then decides.
   const Lane sig_bound = -fn * rad + 4.0 * ((lane_abs(mt.x) + lane_abs(mt.y)) + lane_abs(mt.z));
   const Lane tau_bound = ((lane_abs(ft.x) + lane_abs(ft.y)) + lane_abs(ft.z)) * rad + 2.0 * lane_abs(mn);
-  if (lane_any(odd | (sig_bound > fs * rad) | (tau_bound > ts * rad))) return false;
+  if (lane_any(odd | (sig_bound > left * b.sigma_ar()) | (tau_bound > left * b.tau_ar()))) return false;
 
   out.fn = fn;
   out.ft = ft;

@@ -69,15 +69,20 @@ struct Bond {
 // four to a block). A group of four bonded pairs then reads and writes its bonds with one
 // aligned vector load or store per field: gathered from four Bond records and transposed it
 // cost a quarter more of the bonds' time per step (docs/performance in the README).
+// Besides the state, the constants that the update uses, computed once when the slots are
+// filled: k_n A, k_t A, k_t J, k_n J / 2 (eq. 12's stiffnesses without dt) and sigma_c A r_b,
+// tau_c A r_b (the strength bounds' right-hand sides, as the four-lane kernel tests them).
 struct alignas(64) BondBlock {
-  enum Field { NX, NY, NZ, FN, FTX, FTY, FTZ, MN, MTX, MTY, MTZ, RADIUS, KN, KT, SIGMA_C, TAU_C, kFields };
+  enum Field { NX, NY, NZ, FN, FTX, FTY, FTZ, MN, MTX, MTY, MTZ, RADIUS, KN_A, KT_A, KT_J, KN_HALF_J,
+               SIGMA_AR, TAU_AR, kFields };
   double f[kFields][4];
 };
 
 // A slot that holds no bond (the padding before a run of slots starts a block).
 constexpr Index kNoBond = ~Index{0};
 
-// Slot s of `blocks` (block s / 4, lane s % 4) to and from a Bond's fields of the same names.
+// Slot s of `blocks` (block s / 4, lane s % 4): its state into a Bond's fields of the same
+// names (the record holds the constants), and a Bond's state and constants into it.
 inline void load_slot(const BondBlock* blocks, std::size_t s, Bond& b) {
   const BondBlock& k = blocks[s / 4];
   const std::size_t l = s % 4;
@@ -86,19 +91,17 @@ inline void load_slot(const BondBlock* blocks, std::size_t s, Bond& b) {
   b.ft = Vec3(k.f[BondBlock::FTX][l], k.f[BondBlock::FTY][l], k.f[BondBlock::FTZ][l]);
   b.mn = k.f[BondBlock::MN][l];
   b.mt = Vec3(k.f[BondBlock::MTX][l], k.f[BondBlock::MTY][l], k.f[BondBlock::MTZ][l]);
-  b.radius = k.f[BondBlock::RADIUS][l];
-  b.kn = k.f[BondBlock::KN][l];
-  b.kt = k.f[BondBlock::KT][l];
-  b.sigma_c = k.f[BondBlock::SIGMA_C][l];
-  b.tau_c = k.f[BondBlock::TAU_C][l];
 }
 inline void store_slot(BondBlock* blocks, std::size_t s, const Bond& b) {
   BondBlock& k = blocks[s / 4];
   const std::size_t l = s % 4;
+  // As the bond kernels write them (kn * area * dt is (kn * area) * dt): the same bits.
+  const double area = b.area(), jpolar = b.polar_moment();
   const double v[BondBlock::kFields] = {b.n_prev.x(), b.n_prev.y(), b.n_prev.z(), b.fn,
                                         b.ft.x(), b.ft.y(), b.ft.z(), b.mn,
                                         b.mt.x(), b.mt.y(), b.mt.z(), b.radius,
-                                        b.kn, b.kt, b.sigma_c, b.tau_c};
+                                        b.kn * area, b.kt * area, b.kt * jpolar, b.kn * 0.5 * jpolar,
+                                        b.sigma_c * area * b.radius, b.tau_c * area * b.radius};
   for (int f = 0; f < BondBlock::kFields; ++f) k.f[f][l] = v[f];
 }
 
