@@ -684,3 +684,75 @@ def test_a_bond_is_the_same_in_and_out_of_the_neighbour_list():
         assert np.all(np.abs(a[key]) > 0) if key in ("fn", "mn") else np.abs(a[key]).max() > 0
     np.testing.assert_array_equal(np.array(listed.f), np.array(dropped.f))
     np.testing.assert_array_equal(np.array(listed.t), np.array(dropped.t))
+
+
+# --------------------------------------------------------------------------------------
+# The slots: listed bonds' state kept in blocks between list builds (World::map_bonds)
+# --------------------------------------------------------------------------------------
+
+
+def _bonded_cube(n_side=4, seed=5):
+    """n_side^3 spheres on a squeezed cubic lattice in a box of six planes, every contact and
+    every pair within 5 um bonded (so some bonded pairs start apart), shaken by random
+    velocities and spins: the pair loop takes groups of four bonds from the slot blocks, pairs
+    come into and out of contact, and the list is rebuilt now and then."""
+    rng = np.random.default_rng(seed)
+    a = 3.9e-4
+    g = np.arange(n_side) * a
+    x = np.stack(np.meshgrid(g, g, g, indexing="ij"), -1).reshape(-1, 3)
+    r = 2.0e-4 * (1.0 + 0.02 * rng.uniform(-1, 1, len(x)))
+    L = (n_side - 1) * a
+    w = pd.World(dt=2e-6, gravity=(0, 0, 0), box=((-1e-3,) * 3, (L + 1e-3,) * 3), skin=2e-5)
+    w.add_particles(x, r)
+    for k in range(3):
+        e = np.eye(3)[k]
+        w.add_plane(f"lo{k}", (-1.9e-4 * e).tolist(), e.tolist())
+        w.add_plane(f"hi{k}", ((L + 1.9e-4) * e).tolist(), (-e).tolist())
+    w.create_bonds(pd.BondLaw(gap_tolerance=5e-6).to_core())
+    w.set_velocities(rng.normal(0.0, 0.02, (len(x), 3)), rng.normal(0.0, 50.0, (len(x), 3)))
+    return w
+
+
+def test_reading_or_saving_bonds_mid_run_changes_nothing():
+    """The records are written back from the slots whenever something outside the force pass
+    reads them; reading, saving and restoring mid-run must leave the run bit for bit as it
+    was, and the values read must be the bonds' current state (a restored copy continues from
+    them)."""
+    quiet, busy = _bonded_cube(), _bonded_cube()
+    assert quiet.bond_count > 100
+    quiet.run(400)
+    for _ in range(40):
+        busy.run(10)
+        busy.bonds()
+        busy.potential_energy()  # reads the bonds' records too
+    np.testing.assert_array_equal(quiet.positions(), busy.positions())
+    a, b = quiet.bonds(), busy.bonds()
+    for key in ("fn", "ft", "mn", "mt", "mode"):
+        np.testing.assert_array_equal(a[key], b[key])
+    assert np.abs(a["fn"]).max() > 0 and np.abs(a["mt"]).max() > 0
+    # A copy restored from the state read now goes on exactly as the original.
+    copy = pd.World.from_state(busy.get_state())
+    busy.run(200)
+    copy.run(200)
+    np.testing.assert_array_equal(busy.positions(), copy.positions())
+    for key in ("fn", "ft", "mn", "mt"):
+        np.testing.assert_array_equal(busy.bonds()[key], copy.bonds()[key])
+
+
+def test_changing_a_bond_property_mid_run_reaches_the_slots():
+    """set_bond_property between runs must act on the next step, listed bonds included: halving
+    every bond's k_n halves the normal force increment of the next step."""
+    w = _bonded_cube()
+    w.run(100)
+    kn = w.bonds()["kn"]
+    ref = w.clone()
+    fn0 = w.bonds()["fn"].copy()
+    w.set_bond_property("kn", 0.5 * kn)
+    ref.set_bond_property("kn", kn)  # the same values: nothing changes
+    w.step()
+    ref.step()
+    d_half = w.bonds()["fn"] - fn0
+    d_full = ref.bonds()["fn"] - fn0
+    moving = np.abs(d_full) > 1e-12 * np.abs(fn0).max()
+    assert moving.sum() > 50
+    np.testing.assert_allclose(d_half[moving], 0.5 * d_full[moving], rtol=1e-6)

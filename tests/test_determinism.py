@@ -131,6 +131,8 @@ def test_vector_kernels_give_the_scalar_kernels_bits(n_side, threads):
     assert np.array_equal(np.array(a.t), np.array(b.t))
     for k, v in a.broken_bonds().items():
         assert np.array_equal(v, b.broken_bonds()[k]), k
+    for k, v in a.bonds().items():  # the slots' state, written back to the records
+        assert np.array_equal(v, b.bonds()[k]), k
 
 
 def test_sorting_particles_permutes_the_state_and_keeps_the_dynamics():
