@@ -67,8 +67,8 @@ struct Bond {
 // Four bonds' loading state and constants, one bond per lane, as the pair loop keeps the bonds
 // whose pairs are in the neighbour list (World::map_bonds puts them in "slots", in list order,
 // four to a block). A group of four bonded pairs then reads and writes its bonds with one
-// aligned vector load or store per field: gathered from four Bond records and transposed it
-// cost a quarter more of the bonds' time per step (docs/performance in the README).
+// aligned vector load or store per field, where gathering them from four Bond records and
+// transposing them made the bonds' share of a step about a sixth larger (README, Performance).
 // Besides the state, the constants that the update uses, computed once when the slots are
 // filled: k_n A, k_t A, k_t J, k_n J / 2 (eq. 12's stiffnesses without dt) and sigma_c A r_b,
 // tau_c A r_b (the strength bounds' right-hand sides, as the four-lane kernel tests them).
