@@ -803,9 +803,10 @@ PELLETDEM_INLINE bool bonded_group(const Index* gi, const Index* gj, ContactHist
 
 }  // namespace
 
-// The bonded pairs of the neighbour list (NeighborList::kLiveBonded in `live`): the bonds, the
-// slots that hold their state (World::map_bonds), the slot of each pair (read only where that
-// bit is set) and the bond of each slot, and where a thread notes the bonds that broke. bonds == nullptr: the world has no bonds. damage: some bond may be softening
+// The bonded pairs of the neighbour list (NeighborList::kLiveBond in `live`): the bonds, the
+// slots that hold their state (World::map_bonds), the slot of each pair (read only where a
+// bond bit is set) and the bond of each slot, and where a thread notes the bonds that broke.
+// bonds == nullptr: the world has no bonds. damage: some bond may be softening
 // (BondParams::softening), so its capacity is below its strength.
 struct BondedPairs {
   Bond* bonds = nullptr;
