@@ -848,8 +848,7 @@ PELLETDEM_INLINE PairStats pair_loop_body(long lo, long hi, const Particles& p, 
   // The test written out as the four-lane one does it, so both paths see the same pairs touch.
   auto touching = [&](Index k) {
     const PosRad &a = xr[I[k]], &b = xr[J[k]];
-    const double dx = b.x - a.x, dy = b.y - a.y, dz = b.z - a.z, rsum = a.r + b.r;
-    return (dx * dx + dy * dy) + dz * dz < rsum * rsum;
+    return NeighborList::touching(b.x - a.x, b.y - a.y, b.z - a.z, a.r + b.r);
   };
   // A pair that came apart loses its history (it touched at the last pass).
   auto settle = [&](Index k, bool on) {

@@ -658,25 +658,22 @@ void World::map_bonds() {
   // touch now (the pair loop's test, to the bit), then, from the next block on, those apart,
   // which go through the pair loop in a queue of their own and skip the contact law while all
   // four of a group stay apart.
+  std::vector<Index> runs[2];  // listed bonded pairs touching now, and apart
+  for (std::size_t k = 0; k < nbr_.pair_count(); ++k) {
+    if (!(live[k] & NeighborList::kLiveBonded)) continue;
+    const Vec3 d = p_.x[nbr_.j[k]] - p_.x[nbr_.first[k]];
+    const bool touch = NeighborList::touching(d.x(), d.y(), d.z(), p_.r[nbr_.first[k]] + p_.r[nbr_.j[k]]);
+    runs[touch ? 0 : 1].push_back(static_cast<Index>(k));
+    if (!touch) live[k] ^= NeighborList::kLiveBond;  // kLiveBonded -> kLiveBondApart
+  }
   slot_bond_.clear();
-  std::size_t first_apart = 0;
-  for (int apart = 0; apart < 2; ++apart) {
+  for (const std::vector<Index>& run : runs) {
     while (slot_bond_.size() % 4) slot_bond_.push_back(kNoBond);
-    if (apart) first_apart = slot_bond_.size();
-    for (std::size_t k = 0; k < nbr_.pair_count(); ++k) {
-      if (!(live[k] & NeighborList::kLiveBonded)) continue;
-      const Index i = nbr_.first[k], j = nbr_.j[k];
-      const double dx = p_.x[j].x() - p_.x[i].x(), dy = p_.x[j].y() - p_.x[i].y(),
-                   dz = p_.x[j].z() - p_.x[i].z(), rsum = p_.r[i] + p_.r[j];
-      const bool touch = (dx * dx + dy * dy) + dz * dz < rsum * rsum;
-      if (touch == (apart == 1)) continue;
+    for (Index k : run) {
       slot_bond_.push_back(pair_slot_[k]);
       pair_slot_[k] = static_cast<Index>(slot_bond_.size() - 1);
     }
   }
-  for (std::size_t k = 0; k < nbr_.pair_count(); ++k)
-    if ((live[k] & NeighborList::kLiveBonded) && static_cast<std::size_t>(pair_slot_[k]) >= first_apart)
-      live[k] ^= NeighborList::kLiveBond;  // kLiveBonded -> kLiveBondApart
   slots_.assign((slot_bond_.size() + 3) / 4, BondBlock{});
   for (std::size_t s = 0; s < slot_bond_.size(); ++s)
     if (slot_bond_[s] != kNoBond) store_slot(slots_.data(), s, bonds_[slot_bond_[s]]);

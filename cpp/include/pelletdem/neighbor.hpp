@@ -39,6 +39,13 @@ class NeighborList {
 
   std::size_t pair_count() const { return j.size(); }
 
+  // The touch test of a pair whose centres are (dx, dy, dz) apart, radii summing to rsum,
+  // written as the pair loop's four-lane test computes it: every scalar copy (the pair loop's
+  // tail, World::map_bonds' runs of slots) must agree with it to the bit.
+  static bool touching(double dx, double dy, double dz, double rsum) {
+    return (dx * dx + dy * dy) + dz * dz < rsum * rsum;
+  }
+
   // Sets `live` from the histories: after anything but the pair loop wrote them.
   void mark_live();
 
