@@ -14,13 +14,11 @@ namespace pelletdem {
 
 namespace {
 
-// Magnitude of one contact's rolling-friction moment on one body, eq. 11: m_r f_n r, capped so
-// that one step's torque cannot reverse the spin (otherwise a resting sphere chatters about
-// w = 0). The cap |w| I / dt is the body's, worked out once per particle and step; the moment
-// acts along -w/|w| (Load::roll).
-PELLETDEM_INLINE double rolling_moment(double m_r, double fn, double r, double cap) {
-  if (m_r <= 0.0 || fn <= 0.0 || cap == 0.0) return 0.0;
-  return std::min(m_r * fn * r, cap);
+// Magnitude of one contact's rolling-friction moment on one body, eq. 11: m_r f_n r for a
+// compressive contact. The moments of all of a body's contacts are summed and turned along
+// -w/|w| once per body, where the sum is capped (sum_loads).
+PELLETDEM_INLINE double rolling_moment(double m_r, double fn, double r) {
+  return (m_r > 0.0 && fn > 0.0) ? m_r * fn * r : 0.0;
 }
 
 // Sine and cosine of a step's twist angle: short series for the tiny angles of a time step
@@ -387,9 +385,9 @@ PELLETDEM_INLINE void add_loads(Load* A, const Index* gi, const Index* gj, const
 }
 
 // pair_geometry of four pairs, lane by lane, with the particle values the contact law needs
-// besides (masses, and the rolling-friction caps of eq. 11).
+// besides (masses).
 struct PairLanes {
-  Lane ri, rj, delta, ai, aj, mi, mj, cap_i, cap_j, vn;
+  Lane ri, rj, delta, ai, aj, mi, mj, vn;
   L3 n, wi, wj, v_rel, vt;
   LaneMask touch;  // the pair loop's touch test, to the bit
 };
@@ -413,8 +411,6 @@ PELLETDEM_INLINE PairLanes pair_lanes(const Index* gi, const Index* gj, const Po
   const L4 spin_i = load_motion(mo, gi, kRunSpin), spin_j = load_motion(mo, gj, kRunSpin);
   q.wi = {spin_i.c0, spin_i.c1, spin_i.c2};
   q.wj = {spin_j.c0, spin_j.c1, spin_j.c2};
-  q.cap_i = spin_i.c3;
-  q.cap_j = spin_j.c3;
   const L3 lever{q.ai * q.wi.x + q.aj * q.wj.x, q.ai * q.wi.y + q.aj * q.wj.y, q.ai * q.wi.z + q.aj * q.wj.z};
   const L3 lxn = lane_cross(lever, q.n);
   const L4 vel_i = load_motion(mo, gi, kRunVel), vel_j = load_motion(mo, gj, kRunVel);
@@ -631,9 +627,9 @@ PELLETDEM_INLINE void contact_one(Index i, Index j, ContactHistory& h, const Par
   A[i].f -= fj;
   const Vec3 nxft = g.n.cross(cf.ft);
   A[i].t += -g.ai * nxft;
-  A[i].roll += rolling_moment(cp.rolling, cf.fn, p.r[i], mo[i].roll_cap);
+  A[i].roll += rolling_moment(cp.rolling, cf.fn, p.r[i]);
   A[j].t += -g.aj * nxft;
-  A[j].roll += rolling_moment(cp.rolling, cf.fn, p.r[j], mo[j].roll_cap);
+  A[j].roll += rolling_moment(cp.rolling, cf.fn, p.r[j]);
 }
 
 // A bonded pair (i, j): its contact force where it touches (`on`) and its bond b, added to A
@@ -650,8 +646,8 @@ PELLETDEM_INLINE bool bonded_one(Index i, Index j, bool on, ContactHistory& h, B
   if (broke) bl = BondLoad{0.0, Vec3::Zero(), Vec3::Zero()};
   // The contact's and the bond's normal and tangential forces act at the same point.
   add_pair_load(i, j, g, cf.fn + bl.fn, cf.ft + bl.ft, bl.moment, A);
-  A[i].roll += rolling_moment(cp.rolling, cf.fn, p.r[i], mo[i].roll_cap);
-  A[j].roll += rolling_moment(cp.rolling, cf.fn, p.r[j], mo[j].roll_cap);
+  A[i].roll += rolling_moment(cp.rolling, cf.fn, p.r[i]);
+  A[j].roll += rolling_moment(cp.rolling, cf.fn, p.r[j]);
   return broke;
 }
 
@@ -717,10 +713,9 @@ PELLETDEM_INLINE void contact_law_lanes(const PairLanes& q, const L4& hist, cons
 }
 
 // Eq. 11's moment on each body of four contacts (rolling_moment): zero where it does not apply.
-PELLETDEM_INLINE Lane roll_lanes(const ContactLawParams& cp, Lane fn, Lane r, Lane cap) {
-  const LaneMask on = (cp.rolling > 0.0 ? ~LaneMask{} : LaneMask{}) & (fn > 0.0) & (cap != 0.0);
-  const Lane mfr = cp.rolling * fn * r;
-  return lane_select(on, lane_select(cap < mfr, cap, mfr), Lane{});
+PELLETDEM_INLINE Lane roll_lanes(const ContactLawParams& cp, Lane fn, Lane r) {
+  const LaneMask on = (cp.rolling > 0.0 ? ~LaneMask{} : LaneMask{}) & (fn > 0.0);
+  return lane_select(on, cp.rolling * fn * r, Lane{});
 }
 
 // The largest delta / min(r_i, r_j) into out, as contact_force keeps it: the division only for
@@ -758,7 +753,7 @@ PELLETDEM_INLINE void contact_group(const Index* gi, const Index* gj, ContactHis
   const L3 nxft = lane_cross(nv, ft);
   const Lane mai = -q.ai, maj = -q.aj;
   const L3 ti{mai * nxft.x, mai * nxft.y, mai * nxft.z}, tj{maj * nxft.x, maj * nxft.y, maj * nxft.z};
-  add_loads(A, gi, gj, fj, ti, tj, roll_lanes(cp, fn, q.ri, q.cap_i), roll_lanes(cp, fn, q.rj, q.cap_j));
+  add_loads(A, gi, gj, fj, ti, tj, roll_lanes(cp, fn, q.ri), roll_lanes(cp, fn, q.rj));
   out.contacts += kLanes;
   note_overlap(out, q.delta, q.ri, q.rj, gi, gj);
 }
@@ -794,7 +789,7 @@ PELLETDEM_INLINE bool bonded_group(const Index* gi, const Index* gj, ContactHist
   }
   // The contact's and the bond's normal and tangential forces act at the same point.
   add_pair_loads(A, gi, gj, q, fn + bl.fn, L3{ft.x + bl.ft.x, ft.y + bl.ft.y, ft.z + bl.ft.z}, bl.moment,
-                 roll_lanes(cp, fn, q.ri, q.cap_i), roll_lanes(cp, fn, q.rj, q.cap_j));
+                 roll_lanes(cp, fn, q.ri), roll_lanes(cp, fn, q.rj));
   out.contacts += __builtin_popcount(touching);
   note_overlap(out, q.delta, q.ri, q.rj, gi, gj);
   return true;
@@ -1277,7 +1272,7 @@ void World::wall_share(int tid, int nt_walls, long p_lo, long p_hi, double dt_in
       const Vec3 fp = cf.fn * n_into + cf.ft;
       A[i].f += fp;
       A[i].t += -a * n_into.cross(cf.ft);
-      A[i].roll += rolling_moment(cp.rolling, cf.fn, p_.r[i], mo_[i].roll_cap);
+      A[i].roll += rolling_moment(cp.rolling, cf.fn, p_.r[i]);
       const Vec3 contact_point = p_.x[i] - a * n_into;
       part.force -= fp;
       part.torque += (contact_point - w.point).cross(-fp);

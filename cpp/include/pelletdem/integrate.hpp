@@ -2,6 +2,7 @@
 // The per-particle passes of a step around the force pass: velocity Verlet's first half kick
 // and drift, and the packed records (PosRad, Motion, a zeroed Load) that the contact kernels
 // read. One job: stream through the particle arrays once.
+#include <algorithm>
 #include <vector>
 
 #include "pelletdem/particles.hpp"
@@ -32,7 +33,10 @@ struct LoadSums {
 };
 
 // Force f and torque t on particle i from the buffers: the threads' sums, eq. 11's rolling
-// moments turned along -w/|w| (Load::roll), and gravity.
+// moments turned along -w/|w| (Load::roll), and gravity. The rolling moments of all the
+// body's contacts together are capped at |w| I / dt (Motion::roll_cap): friction can stop a
+// spin within a step but never reverse it. A cap per contact would not do: n contacts
+// would each take the whole spin away, and with n >= 3 the spin would grow as (1 - n) w.
 PELLETDEM_INLINE void sum_loads(const LoadSums& s, long i, const Particles& p, Vec3& f, Vec3& t) {
   const Load& a = s.bufs[0][i];
   f = a.f;
@@ -45,7 +49,7 @@ PELLETDEM_INLINE void sum_loads(const LoadSums& s, long i, const Particles& p, V
     t += b.t;
     roll += b.roll;
   }
-  t -= roll * (s.mo[i].w() * s.spin_inv[i]);
+  t -= std::min(roll, s.mo[i].roll_cap) * (s.mo[i].w() * s.spin_inv[i]);
   f += p.m[i] * s.g;
 }
 

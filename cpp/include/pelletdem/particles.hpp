@@ -16,8 +16,8 @@ struct alignas(32) PosRad {
 static_assert(sizeof(PosRad) == 32, "PosRad is four packed doubles");
 
 // What the contact kernels read of a particle besides (x, r), packed as two runs of four
-// doubles in one cache line: velocity and mass, angular velocity and the rolling-friction cap
-// |w| I / dt of eq. 11. compute_forces (or step's drift pass) writes it from the particle
+// doubles in one cache line: velocity and mass, angular velocity and the cap |w| I / dt on the
+// body's summed rolling-friction moment (eq. 11, see sum_loads). compute_forces (or step's drift pass) writes it from the particle
 // arrays before the pairs. Inside run() it is the working copy of v and w: the drift pass
 // updates them here in place and Particles::v and w are written when the run pauses
 // (World::finish_pending_kick), which spares the pass two streams over the particles.
@@ -52,7 +52,7 @@ struct alignas(64) Load {
   Vec3 f = Vec3::Zero();
   double unused_f = 0.0;  // stays 0: the kernels add 0 to it
   Vec3 t = Vec3::Zero();
-  double roll = 0.0;      // sum of min(m_r f_n r, cap) over the contacts (eq. 11), N m
+  double roll = 0.0;      // sum of m_r f_n r over the contacts (eq. 11), N m
 };
 static_assert(sizeof(Load) == 64, "Load is two runs of four doubles");
 
