@@ -655,13 +655,16 @@ void World::map_bonds() {
     if (!listed) orphans_.push_back(static_cast<Index>(b));
   }
   // Slots in list order, so that the pair loop meets them four by four: first the pairs that
-  // touch now (the pair loop's test, to the bit), then, from the next block on, those apart,
-  // which go through the pair loop in a queue of their own and skip the contact law while all
-  // four of a group stay apart.
-  std::vector<Index> runs[2];  // listed bonded pairs touching now, and apart
+  // touched when the list was built (the pair loop's test, to the bit), then, from the next
+  // block on, those apart, which go through the pair loop in a queue of their own and skip
+  // the contact law while all four of a group stay apart. The grouping sets the order in which
+  // the pairs' loads add up, so it is taken at the list's positions, which a saved state
+  // carries, not at the positions of whenever the map is made: a restored world then groups
+  // its bonds as the saved one did and resumes bit for bit.
+  std::vector<Index> runs[2];  // listed bonded pairs touching at the list build, and apart
   for (std::size_t k = 0; k < nbr_.pair_count(); ++k) {
     if (!(live[k] & NeighborList::kLiveBonded)) continue;
-    const Vec3 d = p_.x[nbr_.j[k]] - p_.x[nbr_.first[k]];
+    const Vec3 d = x_build_[nbr_.j[k]] - x_build_[nbr_.first[k]];
     const bool touch = NeighborList::touching(d.x(), d.y(), d.z(), p_.r[nbr_.first[k]] + p_.r[nbr_.j[k]]);
     runs[touch ? 0 : 1].push_back(static_cast<Index>(k));
     if (!touch) live[k] ^= NeighborList::kLiveBond;  // kLiveBonded -> kLiveBondApart
