@@ -19,7 +19,7 @@ from scipy.spatial import cKDTree
 from scipy.stats import spearmanr
 
 import pelletdem
-from pelletdem import ParameterError, cracks, pipeline, stages
+from pelletdem import ParameterError, caliper, cracks, pipeline, stages
 from pelletdem.engine import BondLaw
 from pelletdem.presets import get_preset
 
@@ -254,12 +254,24 @@ def test_relax_reports_what_the_snapshot_shows(life):
     sc = st.scalars
     snap = pellet.snapshots["relax"]
     x, r = snap["position"], snap["radius"]
+    assert sc["shed_particles"] == 0  # so the main piece is every particle
     d, h, _, _ = _extent(x, r)
-    assert sc["diameter"] == pytest.approx(d, rel=1e-12)
-    assert sc["height"] == pytest.approx(h, rel=1e-12)
-    assert sc["bulk_density"] == pytest.approx(pellet.mass / (math.pi * 0.25 * d * d * h), rel=1e-12)
-    i, _, _ = _pair_overlaps(x, r)
+    assert sc["diameter_extent"] == pytest.approx(d, rel=1e-12)
+    assert sc["height_extent"] == pytest.approx(h, rel=1e-12)
+    assert sc["bulk_density_extent"] == pytest.approx(pellet.mass / (math.pi * 0.25 * d * d * h), rel=1e-12)
+    # The caliper's figures (pelletdem.caliper): the enclosed solid of the same particles.
+    size = caliper.pellet_size(x, r, np.asarray(pellet.world.m) / pellet.preset.density_scale)
+    assert sc["diameter"] == size.diameter and sc["height"] == size.height
+    assert sc["bulk_density"] == pytest.approx(pellet.mass / size.volume, rel=1e-12)
+    assert sc["bulk_density_core"] == size.core_density
+    # One protruding particle sets the extents: the caliper reads a denser pellet.
+    assert sc["bulk_density_extent"] < sc["bulk_density"]
+    i, j, _ = _pair_overlaps(x, r)
     assert sc["coordination_number"] == pytest.approx(2.0 * len(i) / len(x), abs=0.05)
+    z = np.bincount(i, minlength=len(x)) + np.bincount(j, minlength=len(x))
+    assert sc["bulk_particles"] == size.bulk.sum() > 0
+    assert sc["coordination_number_bulk"] == pytest.approx(z[size.bulk].mean(), abs=0.1)
+    assert sc["coordination_number_bulk"] > sc["coordination_number"]
     # At rest: the kinetic energy is below the threshold, or what is left of it is the
     # pellet's rigid drift (a pellet that springs off the floor floats up slowly under the
     # scaled gravity); relative to its centre of mass the pellet is at rest either way.
@@ -330,8 +342,8 @@ def test_bonded_pellet_is_one_piece(life):
     # The series end where the stage ended, with the bonds left intact then.
     assert series["time"][-1] == life.pellet.snapshots["bond"]["time"]
     assert series["n_bonds_intact"][-1] == sc["n_bonds"] - sc["broken_during_ramp"]
-    assert sc["diameter"] == pytest.approx(_stage(life, "relax").scalars["diameter"], rel=0.02)
-    assert sc["height"] == pytest.approx(_stage(life, "relax").scalars["height"], rel=0.02)
+    for key in ("diameter", "height", "diameter_extent", "height_extent"):
+        assert sc[key] == pytest.approx(_stage(life, "relax").scalars[key], rel=0.02), key
     assert life.result.params["bond"]["youngs_modulus"] == life.bond_law.youngs_modulus
 
 

@@ -466,7 +466,10 @@ def _compaction_outputs(res) -> Tuple[dict, dict]:
         "coordination_number_max": c.scalars["coordination_number_max"],
         "dlnbd_dlnsigma": slope,
         "bulk_density_relaxed": r.scalars["bulk_density"],
+        "bulk_density_relaxed_extent": r.scalars["bulk_density_extent"],
+        "bulk_density_relaxed_core": r.scalars["bulk_density_core"],
         "coordination_number_relaxed": r.scalars["coordination_number"],
+        "coordination_number_relaxed_bulk": r.scalars["coordination_number_bulk"],
         "relaxed_converged": r.scalars["converged"],
         "relaxed_height": r.scalars["height"], "relaxed_diameter": r.scalars["diameter"],
     }
@@ -1413,7 +1416,7 @@ def scan(param_grid: Mapping[str, Sequence[float]], targets=None, *, preset="tin
             ok &= good
             suffix = "" if len(tg) == 1 else f"@{(t.sigma_z if t else sigma_z) / _MPA:g}MPa#{ti}"
             for k in ("sigma_f", "dLf_D", "peaked", "bulk_density_relaxed", "bulk_density_max",
-                      "coordination_number_relaxed"):
+                      "coordination_number_relaxed", "coordination_number_relaxed_bulk"):
                 if k in outs:
                     prow[k + suffix] = outs[k]
             if t is not None and good:
@@ -1486,7 +1489,7 @@ def _history_row(names, point: _Point, targets) -> dict:
     for i, (t, outs, sc) in enumerate(zip(targets, point.outputs, point.scores)):
         sfx = "" if len(targets) == 1 else f"#{i}"
         for k in ("sigma_f", "dLf_D", "peaked", "sigma_f_max", "dLf_D_max", "bulk_density_relaxed",
-                  "bulk_density_max", "coordination_number_relaxed"):
+                  "bulk_density_max", "coordination_number_relaxed", "coordination_number_relaxed_bulk"):
             if k in outs:
                 row[k + sfx] = outs[k]
         for k, v in sc.items():
@@ -1907,7 +1910,8 @@ def calibrate_variants(variants=None, preset="tiny", *,
         f = fits[v.label]
         outs = f.outputs[0] if f.outputs else {}
         bd = dens.get(v.sigma_z, {}).get("bulk_density_" + compaction_state, float("nan"))
-        cn = dens.get(v.sigma_z, {}).get("coordination_number_relaxed", float("nan"))
+        # The paper's CN (Table 5) is compared with the bulk's, away from the free surfaces.
+        cn = dens.get(v.sigma_z, {}).get("coordination_number_relaxed_bulk", float("nan"))
         sc = f.scores[0] if f.scores else {}
         rows.append({
             "material": v.material, "mc_percent": v.mc_percent, "sigma_z_mpa": v.sigma_z_mpa,

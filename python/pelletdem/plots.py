@@ -66,8 +66,10 @@ def fig9_compaction(result, measured: Optional[Sequence] = None, ax=None):
 
 
 def fig10_coordination(result, bd_wood: float = 675.0, ax=None):
-    """Fig. 10: coordination number against BD_p/BD_w during compaction, with the relaxed
-    pellet as a point; bd_wood is the intact wood's bulk density, kg/m^3 (oak: 675)."""
+    """Fig. 10: coordination number against BD_p/BD_w during compaction (every particle in
+    the mould), with the relaxed pellet as points: its bulk CN (away from the free surfaces,
+    the one compared with the paper's 12.9 / 12.2 / 10.5) and its CN over every particle, at
+    its caliper density; bd_wood is the intact wood's bulk density, kg/m^3 (oak: 675)."""
     plt = _plt()
     fig, ax = (plt.subplots(figsize=(5, 4)) if ax is None else (ax.figure, ax))
     s = result.stages["compact"].series
@@ -75,7 +77,10 @@ def fig10_coordination(result, bd_wood: float = 675.0, ax=None):
     ax.plot(s["bulk_density"][:n] / bd_wood, s["coordination_number"][:n], label="compaction")
     if "relax" in result.stages:
         r = result.stages["relax"].scalars
-        ax.plot([r["bulk_density"] / bd_wood], [r["coordination_number"]], "s", label="relaxed pellet")
+        x = r["bulk_density"] / bd_wood
+        if "coordination_number_bulk" in r:
+            ax.plot([x], [r["coordination_number_bulk"]], "s", label="relaxed pellet, bulk CN")
+        ax.plot([x], [r["coordination_number"]], "o", mfc="none", label="relaxed pellet, every particle")
     ax.set_xlabel("$BD_p / BD_w$")
     ax.set_ylabel("coordination number CN")
     ax.legend()
@@ -84,13 +89,14 @@ def fig10_coordination(result, bd_wood: float = 675.0, ax=None):
 
 
 def fig11_coordination_effect(results: Iterable, ax=None):
-    """Fig. 11: (a) sigma_1(dL/D) of several runs labelled by their relaxed CN; (b) sigma_f
-    (MPa) against CN."""
+    """Fig. 11: (a) sigma_1(dL/D) of several runs labelled by their relaxed bulk CN; (b)
+    sigma_f (MPa) against that CN."""
     plt = _plt()
     fig, (a, b) = plt.subplots(1, 2, figsize=(10, 4)) if ax is None else (ax[0].figure, ax)
     cn, sf = [], []
     for res in results:
-        c = res.scalar("relax", "coordination_number")
+        rs = res.stages["relax"].scalars
+        c = rs.get("coordination_number_bulk", rs["coordination_number"])
         s = res.stages["diametral"].series
         a.plot(s["dL_D"], s["sigma_1"] / 1e6, label=f"CN = {c:.1f}")
         cn.append(c)

@@ -41,8 +41,10 @@ class Result:
         return self.stages[stage].series[name]
 
     def summary(self) -> dict:
-        """The headline numbers: sigma_f (MPa), dL_f/D, relaxed bulk density (kg/m^3) and
-        coordination number, particle count, seed and the wall time of each stage (s)."""
+        """The headline numbers: sigma_f (MPa), dL_f/D, the relaxed pellet's bulk density
+        (kg/m^3; as a caliper reads it, from the outermost extents, and of its interior) and
+        coordination number (bulk: the one to compare with the paper; and over every
+        particle), particle count, seed and the wall time of each stage (s)."""
         out = {"seed": self.seed, "version": self.version}
         st = self.stages
         if "fill" in st:
@@ -51,8 +53,12 @@ class Result:
             out["sigma_f_mpa"] = st["diametral"].scalars["sigma_f"] / 1e6
             out["dLf_D"] = st["diametral"].scalars["dLf_D"]
         if "relax" in st:
-            out["relaxed_bulk_density"] = st["relax"].scalars["bulk_density"]
-            out["relaxed_coordination_number"] = st["relax"].scalars["coordination_number"]
+            rs = st["relax"].scalars
+            out["relaxed_bulk_density"] = rs["bulk_density"]
+            for key in ("bulk_density_extent", "bulk_density_core", "coordination_number_bulk"):
+                if key in rs:  # results written before these were measured lack them
+                    out["relaxed_" + key] = rs[key]
+            out["relaxed_coordination_number"] = rs["coordination_number"]
         if "compact" in st:
             out["max_overlap_ratio"] = st["compact"].scalars["max_overlap_ratio"]
         out["wall_time_s"] = {k: round(v.wall_time_s, 3) for k, v in st.items()}

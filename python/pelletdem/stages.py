@@ -16,6 +16,7 @@ from typing import Dict, Optional
 
 import numpy as np
 
+from . import caliper
 from .engine import BondLaw, ParameterError, World, random_pack_cylinder, truncated_normal_radii
 from .presets import Preset
 
@@ -154,7 +155,8 @@ def main_piece(world: World) -> np.ndarray:
 
 
 def pellet_extent(world: World, mask: Optional[np.ndarray] = None) -> tuple:
-    """(diameter, height, centre x, centre y) of the particles in `mask` (all by default), m."""
+    """(diameter, height, centre x, centre y) of the outermost surfaces of the particles in
+    `mask` (all by default), m: one protruding sphere sets them (see :func:`measure`)."""
     x = np.asarray(world.x)
     r = np.asarray(world.r)
     if mask is not None:
@@ -163,6 +165,22 @@ def pellet_extent(world: World, mask: Optional[np.ndarray] = None) -> tuple:
     rho = np.hypot(x[:, 0] - cx, x[:, 1] - cy) + r
     height = (x[:, 2] + r).max() - (x[:, 2] - r).min()
     return 2.0 * rho.max(), height, cx, cy
+
+
+def measure(pellet: Pellet, mask: np.ndarray) -> caliper.PelletSize:
+    """Size and density of the particles in `mask` (the pellet's main piece) as a caliper and
+    a balance read them (:mod:`pelletdem.caliper`; masses unscaled)."""
+    w = pellet.world
+    return caliper.pellet_size(np.asarray(w.x)[mask], np.asarray(w.r)[mask],
+                               np.asarray(w.m)[mask] / pellet.preset.density_scale)
+
+
+def bulk_coordination_number(world: World, mask: np.ndarray, size: caliper.PelletSize) -> float:
+    """Mean contacts per particle over the particles of `mask` that `size` counts as bulk
+    (size.bulk_depth or more below the enclosed surface)."""
+    c = world.contacts()
+    z = caliper.contacts_per_particle(world.n, c["i"], c["j"])
+    return float(z[np.nonzero(mask)[0][size.bulk]].mean())
 
 
 def calm(world) -> float:
@@ -412,8 +430,12 @@ def relax(pellet: Pellet, ke_threshold: Optional[float] = None, max_time: Option
     the test uses the internal kinetic energy, and the drift is removed at the end (the pellet
     is picked up and laid between the plates). The preset's release_damping_ratio damps the
     pair and floor contacts meanwhile (the bond stage switches it off). Reports the relaxed
-    pellet's height and diameter (m), bulk density (kg/m^3, unscaled mass) and coordination
-    number. The test starts after `min_time` (s): the release stages leave
+    pellet's height and diameter (m) and bulk density (kg/m^3, unscaled mass) as a caliper
+    and a balance read them, the same from the outermost particle extents (``*_extent``) and
+    the density of its interior (``bulk_density_core``) (:mod:`pelletdem.caliper`), and its
+    coordination number over every particle and over the bulk, away from the free surfaces
+    (``coordination_number_bulk``, the one to compare with the paper's Fig. 10 and Table 5).
+    The test starts after `min_time` (s): the release stages leave
     the pellet at rest (:func:`calm`) but not yet in balance, and its stress waves need a few
     passes to settle. `max_time` (s) bounds the stage; `converged` says which ended it.
     """
@@ -438,16 +460,20 @@ def relax(pellet: Pellet, ke_threshold: Optional[float] = None, max_time: Option
     s = w.samples()
     # Particles the pellet shed are not part of it: a caliper would not measure them.
     piece = main_piece(w)
-    d, h, cx, cy = pellet_extent(w, piece)
-    pellet.diameter, pellet.height = d, h
-    m = np.asarray(w.m)
-    bd = pellet.mass * (m[piece].sum() / m.sum()) / (math.pi * 0.25 * d * d * h)
+    size = measure(pellet, piece)
+    pellet.diameter, pellet.height = size.diameter, size.height
     pellet.snapshot("relax")
     return StageResult("relax", series={"time": s["time"], "kinetic_energy": s["kinetic_energy"],
                                         "coordination_number": s["coordination_number"]},
-                       scalars={"height": h, "diameter": d, "bulk_density": bd,
+                       scalars={"height": size.height, "diameter": size.diameter,
+                                "bulk_density": size.bulk_density,
+                                "height_extent": size.height_extent, "diameter_extent": size.diameter_extent,
+                                "bulk_density_extent": size.bulk_density_extent,
+                                "bulk_density_core": size.core_density,
                                 "shed_particles": float(w.n - piece.sum()),
                                 "coordination_number": w.coordination_number(),
+                                "coordination_number_bulk": bulk_coordination_number(w, piece, size),
+                                "bulk_particles": float(size.bulk.sum()), "bulk_depth": size.bulk_depth,
                                 "kinetic_energy": ke_internal, "drift_speed": float(drift),
                                 "converged": float(out.reason == "internal_kinetic_energy_below")},
                        wall_time_s=time.perf_counter() - t0, steps=settle + out.steps)
@@ -478,8 +504,8 @@ def bond(pellet: Pellet, law: BondLaw, ramp_time: Optional[float] = None,
     b = w.bonds()
     intact = b["mode"] == 0
     frac = largest_cluster_fraction(w.n, b["i"][intact], b["j"][intact])
-    d, h, _, _ = pellet_extent(w, main_piece(w))
-    pellet.diameter, pellet.height = d, h
+    size = measure(pellet, main_piece(w))
+    pellet.diameter, pellet.height = size.diameter, size.height
     pellet.snapshot("bond")
     s = w.samples()
     return StageResult("bond", series={"time": s["time"], "kinetic_energy": s["kinetic_energy"],
@@ -487,7 +513,8 @@ def bond(pellet: Pellet, law: BondLaw, ramp_time: Optional[float] = None,
                        scalars={"n_bonds": float(n_bonds), "bonds_per_particle": 2.0 * n_bonds / w.n,
                                 "largest_cluster_fraction": frac,
                                 "broken_during_ramp": float(len(w.broken_bonds()["i"])),
-                                "height": h, "diameter": d},
+                                "height": size.height, "diameter": size.diameter,
+                                "height_extent": size.height_extent, "diameter_extent": size.diameter_extent},
                        wall_time_s=time.perf_counter() - t0, steps=out.steps)
 
 
@@ -500,7 +527,8 @@ def diametral(pellet: Pellet, speed: Optional[float] = None, max_dLD: Optional[f
     """Diametral compression between two plates parallel to the pellet's axis.
 
     Both plates move towards each other at speed/2 (m/s) so the pellet stays centred; dL is
-    their approach. Records sigma_1 = P / (pi R_p h_p) (eq. 4, Pa) against dL/D, the tensile
+    their approach. R_p, h_p and D are the bonded pellet's size as a caliper reads it
+    (:func:`measure`). Records sigma_1 = P / (pi R_p h_p) (eq. 4, Pa) against dL/D, the tensile
     strength sigma_f (the peak, Pa), dL_f/D, and broken bonds against dL/D; the series end
     at the step where the test stops: dL/D = max_dLD, or earlier where the preset's
     break_drop > 0 and the plate force, averaged over dL/D = BREAK_SMOOTHING_DLD, has fallen
@@ -522,7 +550,11 @@ def diametral(pellet: Pellet, speed: Optional[float] = None, max_dLD: Optional[f
         vel[~piece] = 0.0
         spin[~piece] = 0.0
         w.set_velocities(vel, spin)
-    d, h, cx, cy = pellet_extent(w, piece)
+    # Eq. 4's R_p and h_p and the D of dL/D: the pellet's size as a caliper reads it before
+    # the test.
+    size = measure(pellet, piece)
+    d, h = size.diameter, size.height
+    cx, _ = size.centre
     x, r = np.asarray(w.x), np.asarray(w.r)
     # The plates start clear of every particle (a plane must not start with a particle behind
     # it); dL counts from the moment they reach the pellet itself, past any shed particles.
@@ -578,6 +610,7 @@ def diametral(pellet: Pellet, speed: Optional[float] = None, max_dLD: Optional[f
         scalars={"sigma_f": float(sigma_1[k]) if len(sigma_1) else float("nan"),
                  "dLf_D": float(dL_D[k]) if len(sigma_1) else float("nan"),
                  "diameter": d, "height": h, "plate_speed": v,
+                 "diameter_extent": size.diameter_extent, "height_extent": size.height_extent,
                  "bonds_broken": float(len(broken["i"]) - n_broken0),
                  "bonds_intact": float(w.intact_bond_count()),
                  "stopped_on_break": float(out.reason == "load_drop_below")},
