@@ -38,73 +38,71 @@ class NonFiniteError(SimulationError):
 
 # --- parameters ---------------------------------------------------------------------------
 
+class ParamRow:
+    """One row of a law's parameter table (cpp/include/pelletdem/params.hpp); made by the
+    engine only (``ContactLawParams.rows()``, ``BondParams.rows()``)."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None: ...
+
+    @property
+    def name(self) -> str: ...
+    @property
+    def type(self) -> str:
+        """'double' or 'bool'."""
+    @property
+    def default(self) -> float: ...
+    @property
+    def lo(self) -> float: ...
+    @property
+    def hi(self) -> float: ...
+    @property
+    def check(self) -> str:
+        """How a value is checked: none, range, positive, nonnegative, zero_or_range, whole_range."""
+    @property
+    def unit(self) -> str:
+        """SI unit ('-' dimensionless)."""
+    @property
+    def label(self) -> str:
+        """The name in error messages."""
+    @property
+    def lanes(self) -> bool:
+        """False when the four-lane pair kernel lacks it (a value off its default runs the
+        scalar kernel)."""
+    @property
+    def doc(self) -> str: ...
+
 class ContactLawParams:
-    """The contact law of eq. 5-11 (Table 4 defaults).
+    """The contact law of eq. 5-11 and its candidate effects: one attribute per row of
+    ``rows()`` (float, or bool where the row's type is 'bool'), made from the law's table;
+    ``pelletdem.laws.ContactLaw`` documents them. ``tests/test_stubs.py`` checks the
+    attributes against the rows."""
 
-    k1, k2, kc: loading, unloading and adhesion stiffness, N/m (1e5, 4e5, 600).
-    kt_ratio: tangential stiffness over k1 (1). mu, mu_wall: friction coefficients (0.5, 0.15).
-    rolling: m_r of eq. 11 (0.01). wall_adhesion: walls adhere too (False).
-    wall_stiffness_factor: wall stiffness over a pair's (2). normal_damping_ratio: viscous normal
-    damping, fraction of critical (0). scale_with_radius, r_ref (m): stiffness x 2 r*/r_ref per
-    pair. hardening, hardening_exponent: loading branch k1 (1 + hardening (delta/r*)^exponent).
-    unloading_growth: k2 (1 + unloading_growth delta0/r*), delta0 the residual overlap (0).
-    plate_yield_stress: on crushable walls the loading force is capped at it times pi r^2, Pa
-    (0: off). The last four are optional effects the paper's law lacks (0 switches them off).
-    """
-
-    k1: float
-    k2: float
-    kc: float
-    kt_ratio: float
-    mu: float
-    mu_wall: float
-    rolling: float
-    wall_adhesion: bool
-    wall_stiffness_factor: float
-    normal_damping_ratio: float
-    scale_with_radius: bool
-    r_ref: float
-    hardening: float
-    hardening_exponent: float
-    unloading_growth: float
-    plate_yield_stress: float
     def __init__(self) -> None: ...
+    def __getattr__(self, name: str) -> Any: ...
+    def __setattr__(self, name: str, value: Any) -> None: ...
     def restitution(self) -> float:
         """e = sqrt(k1 / k2) (eq. 8), dimensionless."""
     def validate(self) -> None:
         """Raise ParameterError naming the first field out of its range."""
+    def plain_pairs(self) -> bool:
+        """True while every row the four-lane pair kernel lacks keeps its default."""
+    @staticmethod
+    def rows() -> list[ParamRow]:
+        """The law's parameter table."""
 
 class BondParams:
-    """Parallel-bond parameters (eq. 12-15).
+    """The parallel bond of eq. 12-15 and the bonds' candidate effects: one float attribute
+    per row of ``rows()``, made from the law's table; ``pelletdem.laws.BondLaw`` documents
+    them. ``tests/test_stubs.py`` checks the attributes against the rows."""
 
-    radius: r_b, m (2e-5). youngs_modulus: E_b, Pa (120e6; k_n^b = E_b / (r_i + r_j)).
-    kt_ratio: k_t^b / k_n^b (1). sigma_c, tau_c: tensile and shear strength, Pa (36e6).
-    gap_tolerance: pairs whose surfaces are closer than this are bonded too, m (0).
-    Optional effects the paper's bonds lack (each off at its default):
-    weibull_modulus (-; 0: one strength for all) and strength_seed (an integer, as a float):
-    each bond's sigma_c, tau_c times a Weibull variate of mean 1. softening (-; 0: brittle):
-    past its strength a bond's capacity falls to zero at (1 + softening) times its peak strain.
-    overlap_radius_gain (-): r_b (1 + gain delta0 / r*) per bond. moisture_content,
-    moisture_reference (%), moisture_coefficient (1/%; 0: off): E_b and the strengths times
-    exp(-coefficient (content - reference)).
-    """
-
-    radius: float
-    youngs_modulus: float
-    kt_ratio: float
-    sigma_c: float
-    tau_c: float
-    gap_tolerance: float
-    weibull_modulus: float
-    strength_seed: float
-    softening: float
-    overlap_radius_gain: float
-    moisture_content: float
-    moisture_reference: float
-    moisture_coefficient: float
     def __init__(self) -> None: ...
+    def __getattr__(self, name: str) -> Any: ...
+    def __setattr__(self, name: str, value: Any) -> None: ...
     def validate(self) -> None:
         """Raise ParameterError naming the first field out of its range."""
+    @staticmethod
+    def rows() -> list[ParamRow]:
+        """The law's parameter table."""
 
 class WorldParams:
     """Construction parameters of a World.

@@ -7,38 +7,34 @@
 #include <cstdint>
 #include <vector>
 
+#include "pelletdem/effects_list.hpp"
+#include "pelletdem/params.hpp"
 #include "pelletdem/vec.hpp"
 
 namespace pelletdem {
 
-struct BondParams {
-  double radius = 2.0e-5;          // r_b, m
-  double youngs_modulus = 120e6;   // E_b, Pa; k_n^b = E_b / (r_i + r_j) (eq. 13)
-  double kt_ratio = 1.0;           // k_t^b / k_n^b (the paper leaves it open; k_t = k_n)
-  double sigma_c = 36e6;           // tension strength, Pa
-  double tau_c = 36e6;             // shear strength, Pa
-  double gap_tolerance = 0.0;      // bond pairs whose surfaces are closer than this, m
+// The paper's parallel bond, one row per parameter (params.hpp); the candidate effects' rows
+// (effects/*.hpp) follow them in BondParams.
+#define PELLETDEM_BOND_ROWS(X)                                                                      \
+  X(double, radius, 2.0e-5, Positive, 1e-9, 1.0, "m", "bond radius r_b", true,                      \
+    "bond radius r_b (20 um in the paper)")                                                          \
+  X(double, youngs_modulus, 120e6, Positive, 0.0, kHuge, "Pa", "bond Young's modulus E_b", true,     \
+    "bond Young's modulus E_b; k_n^b = E_b / (r_i + r_j), eq. 13")                                  \
+  X(double, kt_ratio, 1.0, Range, 0.0, 100.0, "-", "bond kt_ratio", true,                           \
+    "k_t^b / k_n^b (the paper leaves it open; 1)")                                                  \
+  X(double, sigma_c, 36e6, Positive, 0.0, kHuge, "Pa", "bond tension strength sigma_c", true,       \
+    "bond tension strength, eq. 14")                                                                \
+  X(double, tau_c, 36e6, Positive, 0.0, kHuge, "Pa", "bond shear strength tau_c", true,             \
+    "bond shear strength, eq. 14 (the paper: equal to sigma_c)")                                    \
+  X(double, gap_tolerance, 0.0, NonNegative, 0.0, kHuge, "m", "bond gap_tolerance", true,          \
+    "pairs whose surfaces are closer than this get a bond too (0: touching pairs only)")
 
-  // Optional effects the paper's bonds lack (each off at its default; see docs/model.md).
-  // A spread of strengths: each bond's sigma_c and tau_c are the values above times a
-  // Weibull variate of modulus weibull_modulus and mean 1, drawn from (strength_seed, i, j).
-  double weibull_modulus = 0.0;    // m (-); 0: every bond has the same strength
-  double strength_seed = 0.0;      // integer seed of the strength draw
-  // Softening before breakage: past its strength a bond's capacity falls linearly with further
-  // stretching and reaches zero at (1 + softening) times the strain at its peak (slope
-  // -E_b / softening); 0: brittle, the paper's eq. 14.
-  double softening = 0.0;          // (-)
-  // Bond radius growing with the contact's plastic flattening at bonding (so with compaction
-  // pressure): r_b,ij = radius (1 + overlap_radius_gain delta0_ij / r*_ij).
-  double overlap_radius_gain = 0.0;  // (-)
-  // Moisture: E_b, sigma_c and tau_c times exp(-moisture_coefficient (moisture_content -
-  // moisture_reference)); moisture_coefficient 0 switches it off.
-  double moisture_content = 8.0;      // %
-  double moisture_reference = 8.0;    // %
-  double moisture_coefficient = 0.0;  // 1/%
-  void validate() const;
-  // Multiplier of E_b and the strengths for the moisture effect (1 when it is off).
-  double moisture_factor() const;
+#define PELLETDEM_BOND_ALL_ROWS(X) PELLETDEM_BOND_ROWS(X) PELLETDEM_BOND_EFFECT_ROWS(X)
+
+struct BondParams {
+  PELLETDEM_BOND_ALL_ROWS(PELLETDEM_PARAM_FIELD)
+  void validate() const { PELLETDEM_BOND_ALL_ROWS(PELLETDEM_PARAM_CHECK) }
+  static std::vector<ParamRow> rows() { return {PELLETDEM_BOND_ALL_ROWS(PELLETDEM_PARAM_ROW)}; }
 };
 
 enum class BondMode : std::uint8_t { Intact = 0, Tension = 1, Shear = 2 };
@@ -53,7 +49,7 @@ struct Bond {
   double mn = 0.0;      // twisting moment on j about n, N m
   Vec3 mt = Vec3::Zero();   // bending moment on j, N m
   double radius, kn, kt, sigma_c, tau_c;  // per bond, so spreads of strength are possible
-  double softening = 0.0;  // BondParams::softening of this bond
+  double softening = 0.0;  // the bond's softening (effects/bond_softening.hpp); 0 brittle
   double damage = 0.0;     // 0 intact .. 1 gone: the capacity left is (1 - damage) sigma_c, tau_c
   BondMode mode = BondMode::Intact;
 

@@ -4,8 +4,11 @@
 // the same law; only the effective radius and mass differ.
 #include <algorithm>
 #include <cmath>
+#include <vector>
 
+#include "pelletdem/effects_list.hpp"
 #include "pelletdem/errors.hpp"
+#include "pelletdem/params.hpp"
 #include "pelletdem/vec.hpp"
 
 namespace pelletdem {
@@ -17,68 +20,48 @@ struct ContactHistory {
   bool blank() const { return delta0 == 0.0 && ft.squaredNorm() == 0.0; }
 };
 
+// The paper's contact law, one row per parameter (params.hpp); the candidate effects' rows
+// (effects/*.hpp) follow them in ContactLawParams.
+#define PELLETDEM_CONTACT_ROWS(X)                                                                  \
+  X(double, k1, 1.0e5, Positive, 0.0, kHuge, "N/m", "k1", true,                                    \
+    "loading (plastic) stiffness, eq. 5 (Table 4 mean; eq. 7 gives k1 = 5 r* p_y)")                 \
+  X(double, k2, 4.0e5, Positive, 0.0, kHuge, "N/m", "k2", true,                                    \
+    "unloading and reloading (elastic) stiffness, eq. 5; e = sqrt(k1/k2), eq. 8")                   \
+  X(double, kc, 600.0, NonNegative, 0.0, kHuge, "N/m", "kc", true, "adhesion stiffness, eq. 5")    \
+  X(double, kt_ratio, 1.0, Range, 0.0, 10.0, "-", "kt_ratio", true,                                \
+    "tangential stiffness k_t over k1 (the paper: equal to the normal stiffness)")                 \
+  X(double, mu, 0.5, Range, 0.0, 10.0, "-", "mu", true, "particle-particle friction coefficient, eq. 9") \
+  X(double, mu_wall, 0.15, Range, 0.0, 10.0, "-", "mu_wall", true, "particle-wall friction coefficient") \
+  X(double, rolling, 0.01, Range, 0.0, 1.0, "-", "rolling", true, "rolling friction coefficient m_r, eq. 11") \
+  X(bool, wall_adhesion, false, None, 0.0, 1.0, "-", "wall_adhesion", true,                        \
+    "walls adhere too (off: a withdrawing steel mould must not drag the pellet's skin along)")     \
+  X(double, wall_stiffness_factor, 2.0, Range, 0.01, 100.0, "-", "wall_stiffness_factor", true,    \
+    "wall contact stiffness over a pair's (eq. 7: r* = r at a flat wall, r/2 for equal spheres)")  \
+  X(double, normal_damping_ratio, 0.0, Range, 0.0, 1.0, "-", "normal_damping_ratio", false,        \
+    "viscous normal damping, fraction of critical on k2 (the paper has none)")                     \
+  X(bool, scale_with_radius, false, None, 0.0, 1.0, "-", "scale_with_radius", false,               \
+    "k1, k2, kc of a pair scaled by 2 r*/r_ref (eq. 7: stiffness proportional to size)")           \
+  X(double, r_ref, 2.0e-4, Positive, 0.0, kHuge, "m", "r_ref", true, "reference radius of that scaling")
+
+#define PELLETDEM_CONTACT_ALL_ROWS(X) PELLETDEM_CONTACT_ROWS(X) PELLETDEM_CONTACT_EFFECT_ROWS(X)
+
 struct ContactLawParams {
-  double k1 = 1.0e5;    // loading (plastic) stiffness, N/m (Table 4 mean)
-  double k2 = 4.0e5;    // unloading/reloading (elastic) stiffness, N/m
-  double kc = 600.0;    // adhesion stiffness, N/m
-  double kt_ratio = 1.0;  // k_t / k1: the paper sets k_t equal to the normal stiffness
-  double mu = 0.5;        // particle-particle friction coefficient
-  double mu_wall = 0.15;  // particle-wall friction coefficient
-  double rolling = 0.01;  // rolling friction coefficient m_r of eq. 11
-  // Adhesion against walls. The paper's adhesion keeps the pellet's particles glued together;
-  // a steel mould or piston that pulled particles along as it withdrew would tear the pellet's
-  // skin off, so walls do not adhere unless asked to.
-  bool wall_adhesion = false;
-  // Wall stiffness relative to a pair of equal spheres. Eq. 7 (k1 = 5 r* p_y) has r* = r/2 for
-  // two equal spheres and r* = r against a flat rigid wall, so a steel wall is twice as stiff.
-  double wall_stiffness_factor = 2.0;
-  // Optional viscous normal damping as a fraction of critical damping on k2. The paper has
-  // none (all normal dissipation is hysteretic); 0 keeps eq. 5 exact.
-  double normal_damping_ratio = 0.0;
-  // Stiffness scaling with size: when true, k1, k2, kc of a pair are the values above times
-  // 2 r* / r_ref (r* = ri rj / (ri + rj); r* = ri against a wall), so two spheres of radius
-  // r_ref get exactly k1, as eq. 7 makes stiffness proportional to radius. Off by default:
-  // Table 4 gives one mean value.
-  bool scale_with_radius = false;
-  double r_ref = 2.0e-4;  // reference radius for the scaling, m
-  // Hardening of the loading branch at large overlap (an optional effect for the residual
-  // above dh/h0 ~ 0.75): k1(delta) = k1 (1 + hardening (delta / r*)^hardening_exponent) where
-  // r* is the pair's equivalent radius. 0 switches it off.
-  double hardening = 0.0;
-  double hardening_exponent = 1.0;
-  // Unloading stiffness that grows with plastic deformation (after Luding 2008, where k2 grows
-  // with the largest overlap): k2(delta0) = k2 (1 + unloading_growth delta0 / r*), delta0 the
-  // residual overlap, which on the loading line grows with the largest overlap. A flattened
-  // contact springs back less; 0 is the paper's constant k2. Signature: less spring-back after
-  // compaction (higher relaxed density, the more so at higher pressure), loading unchanged.
-  double unloading_growth = 0.0;
-  // Crushing where the diametral plates touch the pellet: on walls marked crushable (the
-  // plates) the loading branch is capped at plate_yield_stress * pi r^2, so a particle under a
-  // plate flattens at constant force instead of stiffening. 0 switches it off. Signature: a
-  // longer toe of sigma_1(dL/D), failure at larger dL/D, little change of the peak.
-  double plate_yield_stress = 0.0;
+  PELLETDEM_CONTACT_ALL_ROWS(PELLETDEM_PARAM_FIELD)
 
   double restitution() const { return std::sqrt(k1 / k2); }  // eq. 8
 
   void validate() const {
-    require_positive("k1", k1, "N/m");
-    require_positive("k2", k2, "N/m");
+    PELLETDEM_CONTACT_ALL_ROWS(PELLETDEM_PARAM_CHECK)
     if (k2 < k1)
       throw ParameterError(cat("k2 = ", k2, " N/m is below k1 = ", k1,
                                " N/m: the unloading stiffness must satisfy k2 >= k1 (e = sqrt(k1/k2) <= 1)"));
-    require_nonnegative("kc", kc, "N/m");
-    require_range("kt_ratio", kt_ratio, 0.0, 10.0);
-    require_range("mu", mu, 0.0, 10.0);
-    require_range("mu_wall", mu_wall, 0.0, 10.0);
-    require_range("rolling", rolling, 0.0, 1.0);
-    require_range("wall_stiffness_factor", wall_stiffness_factor, 0.01, 100.0);
-    require_range("normal_damping_ratio", normal_damping_ratio, 0.0, 1.0);
-    require_positive("r_ref", r_ref, "m");
-    require_range("hardening", hardening, 0.0, 1.0e4);
-    require_range("hardening_exponent", hardening_exponent, 0.5, 4.0);
-    require_range("unloading_growth", unloading_growth, 0.0, 1.0e4);
-    require_range("plate_yield_stress", plate_yield_stress, 0.0, 1.0e12, "Pa");
+    require(ContactEffects::unloading_shapers(*this) <= 1,
+            "two effects that shape the unloading stiffness are on at once: switch one off");
   }
+  // True when pairs see only what the four-lane pair kernel implements: every row it lacks
+  // keeps its default (no size scaling, normal damping or effect on pairs).
+  bool plain_pairs() const { return true PELLETDEM_CONTACT_ALL_ROWS(PELLETDEM_PARAM_LANES); }
+  static std::vector<ParamRow> rows() { return {PELLETDEM_CONTACT_ALL_ROWS(PELLETDEM_PARAM_ROW)}; }
 };
 
 // Geometry and kinematics of one contact as the law sees it.
@@ -111,12 +94,9 @@ class HystereticLaw {
 
   const ContactLawParams& params() const { return p_; }
   double damping_factor() const { return damping_factor_; }
-  // True when pairs see the paper's law alone (no size scaling, hardening, growing k2 or
-  // normal damping): the pair loop's four-lane kernel covers exactly that case.
-  bool plain_pairs() const {
-    return !p_.scale_with_radius && p_.hardening == 0.0 && p_.unloading_growth == 0.0 &&
-           p_.normal_damping_ratio == 0.0;
-  }
+  // True when pairs see the paper's law alone: the pair loop's four-lane kernel covers
+  // exactly that case.
+  bool plain_pairs() const { return p_.plain_pairs(); }
 
   // Factor on k1, k2, kc for one contact. Against a wall r_eff is the particle radius.
   PELLETDEM_INLINE double stiffness_scale(double r_eff, bool wall) const {
@@ -124,30 +104,26 @@ class HystereticLaw {
     return p_.scale_with_radius ? 2.0 * r_eff / p_.r_ref : 1.0;
   }
 
-  // Loading branch force at overlap delta (eq. 5 first line, with optional hardening).
+  // Loading branch force at overlap delta (eq. 5 first line, and the effects').
   PELLETDEM_INLINE double loading_force(double delta, double k1, double r_eff) const {
-    if (p_.hardening > 0.0)
-      return k1 * delta * (1.0 + p_.hardening * std::pow(delta / r_eff, p_.hardening_exponent));
-    return k1 * delta;
+    return ContactEffects::loading_force(p_, k1 * delta, delta, r_eff);
   }
 
-  // Unloading stiffness at residual overlap delta0 (constant unless unloading_growth > 0).
+  // Unloading stiffness at residual overlap delta0 (k2 unless an effect shapes it).
   PELLETDEM_INLINE double unloading_stiffness(double k2, double delta0, double r_eff) const {
-    return k2 * (1.0 + p_.unloading_growth * std::max(delta0, 0.0) / r_eff);
+    return ContactEffects::unloading_stiffness(p_, k2, delta0, r_eff);
   }
 
-  // Residual overlap that puts force f on the unloading line through delta:
-  // k2 (1 + a delta0) (delta - delta0) = f with a = unloading_growth / r*, solved for the
-  // root that tends to delta - f / k2 as a -> 0 (written so it does not cancel).
+  // Residual overlap that puts force f on the unloading line through delta.
   PELLETDEM_INLINE double residual_for(double delta, double f, double k2, double r_eff) const {
     // f times 1/k2, not f / k2: the pair kernel hoists the reciprocal of its constant k2.
-    const double c = delta - f * (1.0 / k2);
-    if (p_.unloading_growth <= 0.0) return c;
-    const double a = p_.unloading_growth / r_eff;
-    const double b = 1.0 - a * delta;
-    // a x^2 + b x - c = 0 has one positive root (c >= 0 as f <= k1 delta <= k2 delta)
-    const double root = std::sqrt(std::max(b * b + 4.0 * a * c, 0.0));
-    return (b > 0.0) ? 2.0 * c / (b + root) : (root - b) / (2.0 * a);
+    const double plain = delta - f * (1.0 / k2);
+    return ContactEffects::residual(p_, plain, delta, f, k2, r_eff);
+  }
+
+  // Largest loading force of a wall contact of a particle of radius r, N (kHuge: none).
+  PELLETDEM_INLINE double wall_load_cap(double r, bool crushable) const {
+    return ContactEffects::wall_load_cap(p_, kHuge, r, crushable);
   }
 
   // Normal force of eq. 5; updates the residual overlap delta0 so the unloading line moves
