@@ -42,7 +42,7 @@ Data: :class:`Dataset` of :class:`Observation` s (a measured value, its replicat
 lies on which curve of which :class:`Condition`); built from the paper's tables
 (:meth:`Dataset.from_paper`), from measured curves (:meth:`Dataset.from_curves`) or made by
 :func:`synthetic_dataset` with a hidden effect. Simulators: :class:`EngineSimulator` runs the
-C++ pellet through :mod:`pelletdem.calibrate`'s cache and executors; :class:`FunctionSimulator`
+C++ pellet through the calibration's run cache and executors; :class:`FunctionSimulator`
 wraps any Python function (used by fast tests with an analytic model).
 """
 from __future__ import annotations
@@ -363,7 +363,8 @@ class FunctionSimulator(Simulator):
 
 class EngineSimulator(Simulator):
     """The C++ pellet: fill -> compact (condition's sigma_z) -> ... -> diametral test, through
-    :mod:`pelletdem.calibrate` (run cache, relaxed-pellet reuse, executors).
+    the calibration's run cache, relaxed-pellet reuse and executors (:mod:`pelletdem.runs`,
+    :mod:`pelletdem.execution`).
 
     ``preset``: name or Preset; ``bond``: base BondLaw; ``contact``: ContactLaw field
     overrides; ``seeds``: packings averaged per condition; ``max_dLD``: end of the test;
@@ -377,16 +378,19 @@ class EngineSimulator(Simulator):
     def __init__(self, preset="tiny", *, bond=None, contact: Optional[Mapping[str, float]] = None,
                  seeds: Sequence[int] = (0,), max_dLD: Optional[float] = None, executor="serial",
                  max_workers: Optional[int] = None, cache_dir=None, relaxed_dir=None):
-        from . import calibrate
         from .engine import BondLaw
+        from .execution import Evaluator, open_executor, with_relaxed_dir
+        from .run_cache import RunCache
+        from .runs import make_spec, run_setup
+        from .worker import run_point
 
-        self._cal = calibrate
-        self.setup = calibrate._setup(preset, bond if bond is not None else BondLaw(), dict(contact or {}),
-                                      seeds, max_dLD)
+        self._make_spec = make_spec
+        self.setup = run_setup(preset, bond if bond is not None else BondLaw(), dict(contact or {}),
+                               seeds, max_dLD)
         self._stack = contextlib.ExitStack()
-        ex = self._stack.enter_context(calibrate._open_executor(executor, max_workers))
-        runner = calibrate._with_relaxed_dir(calibrate.run_point, relaxed_dir)
-        self.evaluator = calibrate._Evaluator(calibrate.RunCache(cache_dir), ex, runner)
+        ex = self._stack.enter_context(open_executor(executor, max_workers))
+        runner = with_relaxed_dir(run_point, relaxed_dir)
+        self.evaluator = Evaluator(RunCache(cache_dir), ex, runner)
 
     def close(self) -> None:
         """Shut the executor down."""
@@ -417,8 +421,8 @@ class EngineSimulator(Simulator):
             else:
                 base[name] = v
         law = dataclasses.replace(self.setup.bond, **bond, moisture_content=float(cond.mc))
-        return self._cal.make_spec(base, preset=self.setup.preset, sigma_z=cond.sigma_z, seed=seed, bond=law,
-                                   contact=contact, max_dLD=self.setup.max_dLD)
+        return self._make_spec(base, preset=self.setup.preset, sigma_z=cond.sigma_z, seed=seed, bond=law,
+                               contact=contact, max_dLD=self.setup.max_dLD)
 
     def predict(self, params, conditions):
         """Run (or fetch from the cache) every (condition, seed) and average over seeds."""
