@@ -12,7 +12,8 @@ always run with ``threads=1``; the thread count is not part of the key.
 
 Fill, compaction, unloading, demoulding and relaxation depend only on (preset, contact law,
 sigma_z, seed): :attr:`RunSpec.relax_key` leaves out the fields that act after relaxation
-(those of the diametral test, and the plates' crushing), so that one relaxed pellet serves
+(those of the diametral test, and the contact-law fields of the effects that
+:data:`pelletdem.effects.EFFECTS` declares to act in it), so that one relaxed pellet serves
 every bond law and diametral setting.
 
 A scan or fit shares one :class:`RunSetup` (preset, base laws, seeds) across its points;
@@ -31,6 +32,7 @@ from typing import Any, Dict, Iterable, Mapping, Optional, Sequence, Tuple
 import numpy as np
 
 from ._version import __version__
+from .effects import EFFECTS
 from .engine import BondLaw, k1_from_yield_strength
 from .presets import Preset, get_preset
 
@@ -59,8 +61,10 @@ SCAN_ONLY_PARAMETERS: Dict[str, Tuple[str, str]] = {"seed": ("-", "packing seed 
 
 # Preset fields that do not change fill..relax (they act in the bond and diametral stages).
 _AFTER_RELAX_FIELDS = ("name", "plate_speed", "max_dLD", "break_drop", "break_from_dLD", "bond_ramp_time")
-# Contact-law fields that act only on the diametral plates (crushable walls).
-_AFTER_RELAX_CONTACT = ("plate_yield_stress",)
+# Contact-law fields that act only in the diametral test (the plates' crushing), read from
+# the effects library, so that a new diametral contact effect needs no second edit here.
+_AFTER_RELAX_CONTACT = tuple(e.param[len("contact."):] for e in EFFECTS.values()
+                             if e.stage == "diametral" and e.param.startswith("contact."))
 
 
 def canonical(v, where: str = "value"):
