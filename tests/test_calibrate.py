@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 from pelletdem import calibrate as C
-from pelletdem import measured
+from pelletdem import measured, runs
 from pelletdem.engine import BondLaw
 from pelletdem.presets import get_preset
 
@@ -54,7 +54,7 @@ def power_law_runner(spec):
     if "sigma_f" in out:
         x = np.linspace(0, 1.5 * out["dLf_D"], 50)
         curve = {"dL_D": x.tolist(), "sigma_1": (out["sigma_f"] * np.sin(np.pi / 2 * x / out["dLf_D"])).tolist()}
-    return {"key": spec.key, "relax_key": spec.relax_key, "spec": C._canon(spec.payload()), "ok": True,
+    return {"key": spec.key, "relax_key": spec.relax_key, "spec": runs.canonical(spec.payload()), "ok": True,
             "error": None, "outputs": out, "curve": curve, "compaction_curve": {}, "relaxed_reused": False,
             "wall_time_s": 0.0, "worker": str(os.getpid())}
 
@@ -129,10 +129,10 @@ def test_cache_key_is_sensitive_to_every_input(monkeypatch):
         assert variants[name].relax_key != ref.relax_key, name
     # the package version and the engine build are part of the key
     ref_key = ref.key
-    monkeypatch.setattr(C, "__version__", "9.9.9")
+    monkeypatch.setattr(runs, "__version__", "9.9.9")
     assert C.make_spec({"E_b": 30e6, "sigma_c": 9e6}, **base).key != ref_key
     monkeypatch.undo()
-    monkeypatch.setattr(C, "_FINGERPRINT", "0" * 16)
+    monkeypatch.setattr(runs, "engine_fingerprint", lambda: "0" * 16)
     assert C.make_spec({"E_b": 30e6, "sigma_c": 9e6}, **base).key != ref_key
     monkeypatch.undo()
     assert ref.key == ref_key
@@ -440,7 +440,7 @@ def test_calibrate_variants_transfers_a_contact_law_and_warm_starts(tmp_path):
     warm = C.calibrate_variants(vs, "quick", compaction=None, contact=first.contact,
                                 start=first.bond_start(), cache_dir=tmp_path, executor="serial",
                                 runner=power_law_runner, max_runs=8)
-    seen = [C._canon(json.loads(p.read_text())["spec"]) for p in tmp_path.rglob("*.json")]
+    seen = [runs.canonical(json.loads(p.read_text())["spec"]) for p in tmp_path.rglob("*.json")]
     assert seen and all(s["preset"]["contact"]["k1"] == pytest.approx(k1, rel=1e-9) for s in seen)
     assert len(CALLS) < runs_cold
     assert (warm.table["z_sigma_f"].abs() < 1).all() and (warm.table["z_dLf_D"].abs() < 1).all()

@@ -17,6 +17,7 @@ import pytest
 from pelletdem import loop
 from pelletdem.effects import EFFECTS, Effect
 from pelletdem.loop import Condition, Dataset, FunctionSimulator, Observation, Prediction
+from pelletdem.loop_selection import profile_start
 
 FIT = [Condition(60e6), Condition(120e6)]
 HELD = [Condition(90e6)]
@@ -162,7 +163,7 @@ def test_profile_leaves_out_strengths_where_the_effect_never_acts():
                           max_iter=0)
     cap = Effect("cap", "contact.plate_yield_stress", "Pa", 0.01, 10.0, 0.2, True, 0.0, "diametral",
                  "a cap no load reaches above 1", "")
-    st = loop._profile_start(sim, data, base, cap, BOUNDS, 5.0, 5)
+    st = profile_start(sim, data, base, cap, BOUNDS, 5.0, 5)
     assert st["contact.plate_yield_stress"] < 1.0
 
 

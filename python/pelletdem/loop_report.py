@@ -11,7 +11,8 @@ from typing import Dict, List
 
 import numpy as np
 
-from .loop import LoopResult, QUANTITIES
+from .loop_data import QUANTITIES
+from .loop_selection import LoopResult
 
 __all__ = ["write_report"]
 

@@ -21,7 +21,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .measured import Curve, _nanmean, _sample_sd, interp_curve
+from .curves import Curve, interp_curve, nanmean, sample_sd
 
 __all__ = [
     "MIN_OVERLAP",
@@ -241,8 +241,8 @@ def rrmse_replicates(measured: Curve, sim_x, sim_y, *, x_range=None, grid=None,
     return ReplicateRRMSE(
         replicate=tuple(ids),
         per_replicate=scores_arr,
-        mean=float(_nanmean(scores_arr)),
-        sd=float(_sample_sd(scores_arr)),
+        mean=float(nanmean(scores_arr)),
+        sd=float(sample_sd(scores_arr)),
         mean_curve=mean_score,
         noise_floor=_noise_floor(stack, mc.mean[full], min_fraction_of_peak),
     )

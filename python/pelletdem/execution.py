@@ -1,0 +1,315 @@
+"""Where runs are executed, and the driver side that submits them (:class:`Evaluator`).
+
+Runs go to a ``concurrent.futures`` executor (:func:`open_executor`): a local
+``ProcessPoolExecutor`` (spawn, ``max_workers``) by default, ``executor="serial"`` to run in
+this process, any ``concurrent.futures.Executor``, or a Dask ``distributed.Client`` (its
+``get_executor(pure=False)`` is used). The process pool starts its workers with 'spawn' (a
+forked OpenMP runtime can hang), so a script that calls :func:`pelletdem.search.scan`,
+:func:`pelletdem.search.fit` or :func:`pelletdem.variants.calibrate_variants` with it must
+keep its work under ``if __name__ == "__main__":``; a worker that dies is replaced, and its
+point retried once on its own. The :class:`Evaluator` serves cached runs, never runs a key
+twice and writes the run cache (:class:`pelletdem.run_cache.RunCache`) itself, so Dask
+workers need no shared file system (``relaxed_dir`` does need one).
+"""
+from __future__ import annotations
+
+import concurrent.futures as cf
+import contextlib
+import multiprocessing
+import os
+import threading
+import warnings
+from typing import Callable, Dict, List, Optional, Sequence
+
+from .run_cache import RunCache
+from .runs import RunSpec, canonical
+from .worker import run_point
+
+__all__ = ["open_executor", "with_relaxed_dir", "Evaluator"]
+
+
+class _SerialExecutor(cf.Executor):
+    """Runs each call at submit, in the calling thread, one at a time."""
+
+    _lock = threading.Lock()
+
+    def submit(self, fn, *args, **kwargs):
+        fut = cf.Future()
+        with self._lock:
+            try:
+                fut.set_result(fn(*args, **kwargs))
+            except BaseException as e:  # noqa: BLE001 (handed to the future)
+                fut.set_exception(e)
+        return fut
+
+
+def _is_dask_client(obj) -> bool:
+    return type(obj).__module__.startswith("distributed") and hasattr(obj, "get_executor")
+
+
+class _RespawningPool(cf.Executor):
+    """A process pool that survives its workers: when one dies the pool is broken (every
+    pending future fails with BrokenProcessPool and submit refuses), so the next submit gets a
+    fresh pool of the same size. ``submit_isolated`` runs a call alone in a one-worker pool of
+    its own (at most ``max_workers`` at a time): a retried point that kills its worker again
+    then takes no other point down with it."""
+
+    def __init__(self, pool: cf.ProcessPoolExecutor, own: bool):
+        self._pool, self._own = pool, own
+        self._max_workers = getattr(pool, "_max_workers", None) or os.cpu_count() or 1
+        self._mp_context = getattr(pool, "_mp_context", None) or multiprocessing.get_context("spawn")
+        self._lock = threading.Lock()
+        self._made: List[cf.ProcessPoolExecutor] = []  # replacement pools, shut down with us
+        self._queue: List[tuple] = []
+        self._running = 0
+        self._isolated: set = set()
+
+    def submit(self, fn, *args, **kwargs):
+        with self._lock:
+            pool = self._pool
+        try:
+            return pool.submit(fn, *args, **kwargs)
+        except cf.BrokenExecutor:
+            with self._lock:
+                if self._pool is pool:
+                    self._pool = cf.ProcessPoolExecutor(max_workers=self._max_workers, mp_context=self._mp_context)
+                    self._made.append(self._pool)
+                pool = self._pool
+            return pool.submit(fn, *args, **kwargs)
+
+    def submit_isolated(self, fn, *args) -> cf.Future:
+        out = cf.Future()
+        with self._lock:
+            self._queue.append((fn, args, out))
+        self._pump()
+        return out
+
+    def _pump(self) -> None:
+        while True:
+            with self._lock:
+                if not self._queue or self._running >= self._max_workers:
+                    return
+                fn, args, out = self._queue.pop(0)
+                self._running += 1
+                pool = cf.ProcessPoolExecutor(max_workers=1, mp_context=self._mp_context)
+                self._isolated.add(pool)
+            try:
+                inner = pool.submit(fn, *args)
+            except BaseException as e:  # noqa: BLE001 (handed to the future)
+                self._isolated_done(None, pool, out, e)
+                continue
+            inner.add_done_callback(lambda f, pool=pool, out=out: self._isolated_done(f, pool, out))
+
+    def _isolated_done(self, f, pool, out: cf.Future, error=None) -> None:
+        # Called in the pool's own manager thread: shut it down without waiting for itself.
+        pool.shutdown(wait=False)
+        with self._lock:
+            self._running -= 1
+            self._isolated.discard(pool)
+        try:
+            if error is None:
+                error = f.exception()
+            if error is None:
+                out.set_result(f.result())
+            else:
+                out.set_exception(error)
+        except cf.InvalidStateError:  # cancelled meanwhile
+            pass
+        self._pump()
+
+    def shutdown(self, wait=True, *, cancel_futures=False):
+        with self._lock:
+            pools = list(self._made) + list(self._isolated) + ([self._pool] if self._own else [])
+            for _, _, out in self._queue:
+                out.cancel()
+            self._queue.clear()
+        for pool in pools:
+            pool.shutdown(wait=wait, cancel_futures=cancel_futures)
+
+
+@contextlib.contextmanager
+def open_executor(executor, max_workers: Optional[int]):
+    """A context manager yielding the executor runs are submitted to, shut down on exit when
+    it is ours. ``executor``: None (a spawn process pool of ``max_workers``, default the CPU
+    count, that replaces workers which die), a ``ProcessPoolExecutor`` (the caller's, wrapped
+    the same way and left running), 'serial' (each run at submit, in the calling thread), a
+    Dask ``distributed.Client`` or any object with ``submit``. ValueError for anything else."""
+    if executor is None:
+        n = max_workers or os.cpu_count() or 1
+        if not isinstance(n, int) or n < 1:
+            raise ValueError(f"max_workers = {max_workers!r} must be an integer >= 1")
+        ex = _RespawningPool(cf.ProcessPoolExecutor(max_workers=n, mp_context=multiprocessing.get_context("spawn")),
+                             own=True)
+        try:
+            yield ex
+        finally:
+            ex.shutdown(wait=True, cancel_futures=True)
+    elif isinstance(executor, cf.ProcessPoolExecutor):
+        # The caller's pool, kept alive by us only until it breaks; our replacements are ours.
+        ex = _RespawningPool(executor, own=False)
+        try:
+            yield ex
+        finally:
+            ex.shutdown(wait=True)
+    elif isinstance(executor, str):
+        if executor != "serial":
+            raise ValueError(f"executor = {executor!r}: pass 'serial', None (a process pool), a "
+                             "concurrent.futures.Executor or a distributed.Client")
+        yield _SerialExecutor()
+    elif _is_dask_client(executor):
+        yield executor.get_executor(pure=False)
+    elif hasattr(executor, "submit"):
+        yield executor
+    else:
+        raise ValueError(f"executor = {executor!r} has no submit(); pass a concurrent.futures.Executor "
+                         "or a distributed.Client")
+
+
+def with_relaxed_dir(runner, relaxed_dir):
+    """``runner`` as it is run: :func:`pelletdem.worker.run_point` bound to ``relaxed_dir``
+    (a directory, created here, for relaxed-pellet checkpoints; a picklable partial) when
+    both are given; any other runner, or ``relaxed_dir`` None, unchanged."""
+    if relaxed_dir is None or runner is not run_point:
+        return runner
+    import functools
+
+    os.makedirs(os.fspath(relaxed_dir), exist_ok=True)
+    return functools.partial(run_point, relaxed_dir=os.path.abspath(os.fspath(relaxed_dir)))
+
+
+class Evaluator:
+    """Submits runs, serves cached ones, never runs a key twice, writes the cache.
+
+    ``cache``: the :class:`pelletdem.run_cache.RunCache` records are read from and written
+    to; ``executor``: where runs go (:func:`open_executor`); ``runner``: the function run per
+    :class:`pelletdem.runs.RunSpec` (:func:`with_relaxed_dir`). Counts are in :meth:`stats`.
+
+    A run whose future raises (its worker process died: BrokenProcessPool; or the runner
+    raised) is retried once, alone in a fresh worker when the executor is a process pool; if
+    the retry fails too the point gets a failed record (``ok`` False, ``error`` with both
+    errors, ``worker_failure`` True) that is not cached, so a resumed scan tries it again, and
+    the rest of the scan goes on. KeyboardInterrupt and SystemExit are not retried."""
+
+    RETRIES = 1
+
+    def __init__(self, cache: RunCache, executor, runner: Callable[[RunSpec], dict]):
+        self.cache, self.executor, self.runner = cache, executor, runner
+        self._lock = threading.Lock()
+        self._inflight: Dict[str, cf.Future] = {}
+        self.n_run = 0          # runs executed now
+        self.n_cached = 0       # runs served from the cache
+        self.n_relaxations = 0  # relaxations done by the runs executed now
+        self.sim_time_s = 0.0
+        self.n_retried = 0      # runs submitted again after their first attempt failed
+        self.failures: List[dict] = []  # points that failed every attempt: key, error, attempts
+
+    def submit(self, spec: RunSpec, rerun: bool = False) -> cf.Future:
+        """The run's record as a future: from the cache, or run now (``rerun``: run even when
+        cached, e.g. to recreate a relaxed pellet whose checkpoint is gone; deterministic, so
+        the record comes out the same)."""
+        key = spec.key
+        with self._lock:
+            if key in self._inflight:
+                return self._inflight[key]
+            rec = None if rerun else self.cache.get(key)
+            out = cf.Future()
+            if rec is not None:
+                self.n_cached += 1
+                rec = dict(rec, cached=True)
+                out.set_result(rec)
+                self._inflight[key] = out
+                return out
+            self._inflight[key] = out
+            self.n_run += 1
+        try:
+            fut = self.executor.submit(self.runner, spec)
+        except BaseException as e:
+            with self._lock:
+                self._inflight.pop(key, None)
+                self.n_run -= 1
+            out.set_exception(e)
+            return out
+        fut.add_done_callback(lambda f: self._done(spec, f, out, []))
+        return out
+
+    def _done(self, spec: RunSpec, fut, out: cf.Future, errors: List[str]) -> None:
+        key = spec.key
+        try:
+            rec = fut.result()
+        except BaseException as e:  # noqa: BLE001
+            retry = isinstance(e, Exception) and not isinstance(e, cf.CancelledError) and not out.cancelled()
+            if retry:
+                errors = errors + [f"{type(e).__name__}: {e}"]
+                if len(errors) <= self.RETRIES:
+                    self._retry(spec, out, errors)
+                    return
+                rec = self._failed_record(spec, errors)
+                with self._lock:
+                    self._inflight.pop(key, None)
+                    self.failures.append({"key": key, "error": rec["error"], "attempts": len(errors)})
+                _set(out, result=rec)
+                return
+            with self._lock:
+                self._inflight.pop(key, None)
+            _set(out, error=e)
+            return
+        try:
+            self.cache.put(rec)
+        except Exception as e:  # noqa: BLE001 (a full disk must not lose the result)
+            warnings.warn(f"could not write cache record {key}: {e}")
+        with self._lock:
+            self.n_relaxations += 0 if rec.get("relaxed_reused") else 1
+            self.sim_time_s += float(rec.get("wall_time_s", 0.0))
+        _set(out, result=dict(rec, cached=False, attempts=len(errors) + 1))
+
+    def _retry(self, spec: RunSpec, out: cf.Future, errors: List[str]) -> None:
+        with self._lock:
+            self.n_retried += 1
+        try:
+            isolated = getattr(self.executor, "submit_isolated", None)
+            fut = isolated(self.runner, spec) if isolated else self.executor.submit(self.runner, spec)
+        except Exception as e:  # noqa: BLE001 (an executor that refuses counts as a failed attempt)
+            fut = cf.Future()
+            fut.set_exception(e)
+        fut.add_done_callback(lambda f: self._done(spec, f, out, errors))
+
+    @staticmethod
+    def _failed_record(spec: RunSpec, errors: List[str]) -> dict:
+        return {"key": spec.key, "relax_key": spec.relax_key, "spec": canonical(spec.payload()), "ok": False,
+                "error": f"failed {len(errors)} times, " + "; then ".join(errors),
+                "outputs": {}, "curve": {}, "compaction_curve": {}, "relaxed_reused": True,
+                "relaxed_from": "", "wall_time_s": 0.0, "worker": "", "cached": False,
+                "attempts": len(errors), "worker_failure": True}
+
+    def run_all(self, specs: Sequence[RunSpec]) -> List[dict]:
+        """Records of all specs (submitted grouped by relax key), in the order given."""
+        order = sorted(range(len(specs)), key=lambda i: (specs[i].relax_key, i))
+        futs = {i: self.submit(specs[i]) for i in order}
+        try:
+            return [futs[i].result() for i in range(len(specs))]
+        except BaseException:
+            for f in futs.values():
+                f.cancel()
+            raise
+
+    def stats(self) -> dict:
+        """Counts so far: runs executed (``n_simulations``), served from the cache
+        (``n_cached``), relaxations done (``n_relaxations``), their wall time
+        (``simulation_time_s``, s), retries (``n_retried``) and points that failed every
+        attempt (``n_failed``, ``failures``)."""
+        return {"n_simulations": self.n_run, "n_cached": self.n_cached,
+                "n_relaxations": self.n_relaxations, "simulation_time_s": self.sim_time_s,
+                "n_retried": self.n_retried, "n_failed": len(self.failures),
+                "failures": list(self.failures)}
+
+
+def _set(fut: cf.Future, result=None, error=None) -> None:
+    # A future cancelled by run_all (another point raised) takes no result.
+    try:
+        if error is not None:
+            fut.set_exception(error)
+        else:
+            fut.set_result(result)
+    except cf.InvalidStateError:
+        pass
+

@@ -1,0 +1,283 @@
+"""The discrepancy loop's data: measured :class:`Observation` s of :class:`Condition` s,
+collected in a :class:`Dataset`.
+
+An observation is one measured number (a value, its replicate SD, where it lies on which
+curve of which condition). A dataset is built from the paper's tables
+(:meth:`Dataset.from_paper`), from measured curves (:meth:`Dataset.from_curves`) or made by
+:func:`synthetic_dataset` with a hidden effect. Values are in the SI unit of each quantity
+(:data:`QUANTITIES`).
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Callable, Dict, List, Mapping, Optional, Sequence, Tuple
+
+import numpy as np
+
+from .metrics import DEFAULT_REL_SD_FLOOR
+
+if TYPE_CHECKING:
+    from .loop_simulators import Simulator
+
+__all__ = ["QUANTITIES", "DIAMETRAL_PARTS", "COMPACTION_SPLIT", "Condition", "Observation", "Dataset",
+           "synthetic_dataset"]
+
+#: Observable quantities: name -> (unit, meaning).
+QUANTITIES: Dict[str, Tuple[str, str]] = {
+    "sigma_1": ("Pa", "diametral stress P/(pi R h) at x = dL/D (eq. 4), a curve point"),
+    "sigma_z": ("Pa", "compaction pressure at x = dh/h0, a curve point"),
+    "sigma_f": ("Pa", "tensile strength (peak of sigma_1)"),
+    "dLf_D": ("-", "deformation at failure"),
+    "bulk_density": ("kg/m^3", "bulk density of the relaxed pellet"),
+}
+#: Parts of a diametral curve by x / (dL_f/D): toe below 0.4, rise to 0.85, peak to 1.15.
+DIAMETRAL_PARTS = ((0.4, "toe"), (0.85, "rise"), (1.15, "peak"), (math.inf, "post-peak"))
+#: Compaction curves split at this dh/h0 (the paper's model fits only below it).
+COMPACTION_SPLIT = 0.75
+_MPA = 1e6
+
+
+@dataclass(frozen=True)
+class Condition:
+    """One experimental variant: compaction pressure ``sigma_z`` (Pa), moisture content ``mc``
+    (%), ``material`` (a name, '' when there is one)."""
+
+    sigma_z: float
+    mc: float = 8.0
+    material: str = ""
+
+    def __post_init__(self):
+        if not (isinstance(self.sigma_z, (int, float)) and math.isfinite(self.sigma_z) and 1e5 <= self.sigma_z <= 1e9):
+            raise ValueError(f"sigma_z = {self.sigma_z!r} is out of range: allowed 1e5 <= sigma_z <= 1e9 Pa")
+        if not (isinstance(self.mc, (int, float)) and math.isfinite(self.mc) and 0 <= self.mc <= 100):
+            raise ValueError(f"mc = {self.mc!r} is out of range: allowed 0 <= mc <= 100 %")
+        if not isinstance(self.material, str):
+            raise ValueError(f"material = {self.material!r} must be a string")
+
+    @property
+    def label(self) -> str:
+        """E.g. 'oak MC 8% 120 MPa'."""
+        head = f"{self.material} " if self.material else ""
+        return f"{head}MC {self.mc:g}% {self.sigma_z / _MPA:g} MPa"
+
+
+@dataclass(frozen=True)
+class Observation:
+    """One measured number: ``quantity`` (see :data:`QUANTITIES`) of ``condition``, at ``x``
+    (dL/D or dh/h0 for curve points, NaN for scalars), mean ``value`` and replicate ``sd`` in
+    the quantity's SI unit, ``n`` replicates, and the ``part`` of the curve it lies on."""
+
+    condition: Condition
+    quantity: str
+    x: float
+    value: float
+    sd: float
+    n: int = 1
+    part: str = "scalar"
+
+    def __post_init__(self):
+        if self.quantity not in QUANTITIES:
+            raise ValueError(f"quantity = {self.quantity!r}: allowed {sorted(QUANTITIES)}")
+        if not math.isfinite(self.value):
+            raise ValueError(f"{self.quantity} of {self.condition.label}: value must be finite")
+        if not (math.isfinite(self.sd) and self.sd >= 0):
+            raise ValueError(f"{self.quantity} of {self.condition.label}: sd = {self.sd} must be finite and >= 0")
+        if self.quantity in ("sigma_1", "sigma_z") and not math.isfinite(self.x):
+            raise ValueError(f"a {self.quantity} curve point needs a finite x")
+
+    @property
+    def curve(self) -> str:
+        """Name of the curve the point lies on ('' for scalars)."""
+        return f"{self.condition.label} {self.quantity}" if self.quantity in ("sigma_1", "sigma_z") else ""
+
+    @property
+    def effective_sd(self) -> float:
+        """The SD used in z-scores: the replicate SD floored at 1% of |value| (same unit)."""
+        return max(self.sd, DEFAULT_REL_SD_FLOOR * abs(self.value), 1e-300)
+
+
+def _diametral_part(x: float, x_f: float) -> str:
+    for bound, name in DIAMETRAL_PARTS:
+        if x < bound * x_f:
+            return name
+    return DIAMETRAL_PARTS[-1][1]
+
+
+@dataclass
+class Dataset:
+    """Observations, in a fixed order, with the conditions they cover."""
+
+    observations: List[Observation]
+    name: str = "data"
+
+    def __post_init__(self):
+        self.observations = list(self.observations)
+        if not self.observations:
+            raise ValueError("a Dataset needs at least one observation")
+        for o in self.observations:
+            if not isinstance(o, Observation):
+                raise ValueError(f"observations must be Observation objects, got {type(o).__name__}")
+
+    def __len__(self) -> int:
+        return len(self.observations)
+
+    @property
+    def conditions(self) -> List[Condition]:
+        """The conditions, in order of first appearance."""
+        return list(dict.fromkeys(o.condition for o in self.observations))
+
+    @property
+    def values(self) -> np.ndarray:
+        """Measured values (SI units of each quantity)."""
+        return np.array([o.value for o in self.observations])
+
+    @property
+    def sds(self) -> np.ndarray:
+        """Effective SDs used in z-scores."""
+        return np.array([o.effective_sd for o in self.observations])
+
+    def with_model_sd(self, model_sd: Sequence[float]) -> "Dataset":
+        """A copy whose SDs also carry the model's own scatter: sd = sqrt(sd^2 + model_sd^2)
+        per observation (same unit)."""
+        model_sd = np.asarray(model_sd, float)
+        if model_sd.shape != (len(self),) or not np.all(np.isfinite(model_sd)) or np.any(model_sd < 0):
+            raise ValueError("model_sd must be one finite value >= 0 per observation")
+        return Dataset([dataclasses.replace(o, sd=float(math.hypot(o.sd, m)))
+                        for o, m in zip(self.observations, model_sd)], self.name)
+
+    def subset(self, keep: Callable[[Observation], bool], name: Optional[str] = None) -> "Dataset":
+        """The observations for which ``keep(observation)`` is true."""
+        obs = [o for o in self.observations if keep(o)]
+        if not obs:
+            raise ValueError("the subset is empty")
+        return Dataset(obs, name or self.name)
+
+    def split(self, held_out: Callable[[Condition], bool]) -> Tuple["Dataset", "Dataset"]:
+        """(fit, held-out): observations of conditions for which ``held_out(condition)`` is
+        false, and true. Both must be non-empty."""
+        fit = [o for o in self.observations if not held_out(o.condition)]
+        held = [o for o in self.observations if held_out(o.condition)]
+        if not fit or not held:
+            raise ValueError(f"the split leaves {len(fit)} fit and {len(held)} held-out observations; "
+                             "both need at least one")
+        return Dataset(fit, self.name + " (fit)"), Dataset(held, self.name + " (held out)")
+
+    @classmethod
+    def from_paper(cls, materials: Optional[Sequence[str]] = None,
+                   quantities: Sequence[str] = ("sigma_f", "dLf_D", "bulk_density")) -> "Dataset":
+        """The paper's measurements of the 12 variants (Table 3's sigma_f and dL_f/D, Table 2's
+        pellet bulk density), as scalar observations with their SDs (5 replicates each)."""
+        from .paper_tables import variants
+
+        bad = set(quantities) - {"sigma_f", "dLf_D", "bulk_density"}
+        if bad:
+            raise ValueError(f"quantities {sorted(bad)}: the paper's tables give sigma_f, dLf_D, bulk_density")
+        vs = variants()
+        if materials is not None:
+            known = {v.material for v in vs}
+            for m in materials:
+                if m not in known:
+                    raise ValueError(f"material {m!r}: allowed {sorted(known)}")
+            vs = [v for v in vs if v.material in materials]
+        obs = []
+        for v in vs:
+            c = Condition(float(v.sigma_z), float(v.mc_percent), v.material)
+            src = {"sigma_f": (v.sigma_f, v.sigma_f_sd), "dLf_D": (v.dLf_D, v.dLf_D_sd),
+                   "bulk_density": (v.bd_pellet, v.bd_pellet_sd)}
+            for q in quantities:
+                val, sd = src[q]
+                if math.isfinite(val):
+                    obs.append(Observation(c, q, float("nan"), float(val), float(sd), 5))
+        return cls(obs, "paper (Tables 2, 3)")
+
+    @classmethod
+    def from_curves(cls, curves: Mapping[Condition, object], points: int = 12,
+                    scalars: bool = True, name: str = "curves") -> "Dataset":
+        """Observations from measured curves (:class:`pelletdem.measured.Curve`, with
+        replicates) per condition: ``points`` points of each mean curve on an even grid of x,
+        with the replicates' SD, labelled by part; for diametral curves also sigma_f and
+        dL_f/D of the replicates (``scalars``)."""
+        if not isinstance(points, int) or not 3 <= points <= 500:
+            raise ValueError(f"points = {points!r} is out of range: allowed 3 <= points <= 500")
+        obs = []
+        for cond, curve in curves.items():
+            if not isinstance(cond, Condition):
+                raise ValueError("curves must be keyed by Condition")
+            lo, hi = curve.common_range()
+            if not lo < hi:
+                raise ValueError(f"{cond.label}: the replicates share no x range")
+            grid = np.linspace(lo + 0.02 * (hi - lo), hi, points)
+            mc = curve.mean_curve(grid)
+            nrep = len(curve.replicates)
+            if curve.kind == "diametral":
+                pk = curve.peak()
+                x_f = pk.dLf_D_mean
+                for x, m, s in zip(mc.x, mc.mean, mc.sd):
+                    obs.append(Observation(cond, "sigma_1", float(x), float(m), float(np.nan_to_num(s)), nrep,
+                                           _diametral_part(x, x_f)))
+                if scalars:
+                    obs.append(Observation(cond, "sigma_f", float("nan"), pk.sigma_f_mean,
+                                           float(np.nan_to_num(pk.sigma_f_sd)), nrep))
+                    obs.append(Observation(cond, "dLf_D", float("nan"), pk.dLf_D_mean,
+                                           float(np.nan_to_num(pk.dLf_D_sd)), nrep))
+            else:
+                split = COMPACTION_SPLIT if hi > COMPACTION_SPLIT else float(np.quantile(grid, 0.75))
+                for x, m, s in zip(mc.x, mc.mean, mc.sd):
+                    obs.append(Observation(cond, "sigma_z", float(x), float(m), float(np.nan_to_num(s)), nrep,
+                                           "compaction-low" if x < split else "compaction-high"))
+        return cls(obs, name)
+
+
+
+def synthetic_dataset(sim: Simulator, truth: Mapping[str, float], conditions: Sequence[Condition], *,
+                      noise: float = 0.05, replicates: int = 5, points: int = 12,
+                      quantities: Sequence[str] = ("sigma_1", "sigma_f", "dLf_D", "bulk_density"),
+                      compaction_points: int = 0, seed: int = 0, name: str = "synthetic") -> Dataset:
+    """"Measured" data made by ``sim`` with parameters ``truth`` (which may switch on any
+    effect, in the library or not), with Gaussian noise of relative SD ``noise`` per replicate
+    (curve points: relative to the curve's peak), ``replicates`` replicates averaged, so the
+    reported SD is the replicates' sample SD. ``points`` points per diametral curve from
+    0.1 to 1.6 x its failure point (within the simulated range); ``compaction_points`` on the
+    compaction curve (0: none). Nothing in the returned Dataset says which effect made it.
+    """
+    if not (isinstance(noise, (int, float)) and 0 <= noise < 1):
+        raise ValueError(f"noise = {noise!r} is out of range: allowed 0 <= noise < 1")
+    if not isinstance(replicates, int) or not 2 <= replicates <= 100:
+        raise ValueError(f"replicates = {replicates!r} is out of range: allowed 2 <= replicates <= 100")
+    rng = np.random.default_rng(seed)
+    preds = sim.predict(dict(truth), list(conditions))
+    obs = []
+
+    def noisy(mean: float, scale: float) -> Tuple[float, float]:
+        draws = mean + noise * scale * rng.standard_normal(replicates)
+        return float(draws.mean()), float(draws.std(ddof=1))
+
+    for c in conditions:
+        p = preds[c]
+        if not p.ok:
+            raise RuntimeError(f"the truth's simulation of {c.label} failed: {p.error}")
+        x_f = p.scalars.get("dLf_D", float("nan"))
+        if "sigma_1" in quantities and p.curve is not None:
+            x, y = np.asarray(p.curve[0]), np.asarray(p.curve[1])
+            top = float(np.max(y))
+            hi = min(1.6 * x_f, float(x.max()))
+            for xi in np.linspace(0.1 * x_f, hi, points):
+                m, s = noisy(float(np.interp(xi, x, y)), top)
+                obs.append(Observation(c, "sigma_1", float(xi), m, s, replicates, _diametral_part(xi, x_f)))
+        if compaction_points and p.compaction is not None:
+            x, y = np.asarray(p.compaction[0]), np.asarray(p.compaction[1])
+            order = np.argsort(x)
+            x, y = x[order], y[order]
+            top = float(np.max(y))
+            for xi in np.linspace(0.3 * x.max(), x.max(), compaction_points):
+                m, s = noisy(float(np.interp(xi, x, y)), top)
+                obs.append(Observation(c, "sigma_z", float(xi), m, s, replicates,
+                                       "compaction-low" if xi < COMPACTION_SPLIT else "compaction-high"))
+        for q in ("sigma_f", "dLf_D", "bulk_density"):
+            if q in quantities and math.isfinite(p.scalars.get(q, float("nan"))):
+                v = p.scalars[q]
+                m, s = noisy(v, abs(v))
+                obs.append(Observation(c, q, float("nan"), m, s, replicates))
+    return Dataset(obs, name)
