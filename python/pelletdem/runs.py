@@ -91,12 +91,13 @@ def canonical(v, where: str = "value"):
 
 
 _FINGERPRINT: Optional[str] = None
-_FINGERPRINT_FILES = ("engine.py", "stages.py", "pipeline.py", "presets.py")
+_FINGERPRINT_FILES = ("engine.py", "laws.py", "world.py", "checks.py", "caliper.py", "stages.py",
+                      "pipeline.py", "presets.py")
 
 
 def engine_fingerprint() -> str:
     """First 16 hex digits of a SHA-256 over the compiled engine (``_core``) and the Python
-    files that run a pellet's stages (engine, stages, pipeline, presets): part of every cache
+    files that run a pellet's stages (_FINGERPRINT_FILES): part of every cache
     key, so results of another build are never reused. Computed once per process."""
     global _FINGERPRINT
     if _FINGERPRINT is None:
