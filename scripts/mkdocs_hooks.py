@@ -3,7 +3,8 @@
 Every python/pelletdem/*.py whose name does not start with an underscore gets a page
 ``api/<module>.md`` holding ``::: pelletdem.<module>`` (mkdocstrings renders its docstrings),
 and the compiled engine gets one from its type stub. A module added later (the discrepancy loop,
-say) is documented by the next build without touching mkdocs.yml.
+say) is documented by the next build without touching mkdocs.yml. The laws' parameter tables
+in docs/parameters.md are made from the C++ rows (pelletdem.laws.markdown_table).
 """
 from __future__ import annotations
 
@@ -40,6 +41,20 @@ def on_config(config, **kwargs):
     nav[:] = [item for item in nav if not (isinstance(item, dict) and "API reference" in item)]
     nav.append({"API reference": api})
     return config
+
+
+# docs/parameters.md holds these markers where the laws' tables go: made from the C++ rows.
+LAW_TABLES = {"<!-- law table: contact -->": "ContactLaw", "<!-- law table: bond -->": "BondLaw"}
+
+
+def on_page_markdown(markdown, page, config, files, **kwargs):
+    if any(marker in markdown for marker in LAW_TABLES):
+        import pelletdem
+        from pelletdem.laws import markdown_table
+
+        for marker, law in LAW_TABLES.items():
+            markdown = markdown.replace(marker, markdown_table(getattr(pelletdem, law)))
+    return markdown
 
 
 def on_files(files, config, **kwargs):

@@ -15,7 +15,7 @@ from typing import Any, List
 
 from . import _core
 
-__all__ = ["ContactLaw", "BondLaw", "ParamRow", "law_rows"]
+__all__ = ["ContactLaw", "BondLaw", "ParamRow", "law_rows", "markdown_table"]
 
 ParamRow = _core.ParamRow
 
@@ -101,3 +101,25 @@ BondLaw: Any = _law_class(
     "BondLaw", _core.BondParams,
     "Parallel-bond parameters (eq. 12-15) and the bonds' candidate effects, SI units.", {})
 
+
+def markdown_table(law) -> str:
+    """``law``'s parameter table (ContactLaw or BondLaw) as a Markdown table: field, unit,
+    default, allowed values and what it is, with the candidate effect it belongs to, if any
+    (docs/parameters.md is made with it)."""
+    from .effects import EFFECTS
+
+    prefix = "contact." if law is ContactLaw else "bond."
+    owner = {}
+    for e in EFFECTS.values():
+        for p in (e.param, *e.fixed):
+            if p.startswith(prefix):
+                owner[p[len(prefix):]] = e
+    lines = ["| field | unit | default | allowed | what it is |", "|---|---|---|---|---|"]
+    for r in law.rows():
+        default = str(bool(r.default)) if r.type == "bool" else f"{r.default:g}"
+        doc = r.doc
+        e = owner.get(r.name)
+        if e is not None:
+            doc += f" (candidate effect `{e.name}`, acting in the {e.stage} stage)"
+        lines.append(f"| `{r.name}` | {r.unit} | {default} | {_allowed(r)} | {doc} |")
+    return "\n".join(lines)

@@ -24,24 +24,24 @@ struct ContactHistory {
 // (effects/*.hpp) follow them in ContactLawParams.
 #define PELLETDEM_CONTACT_ROWS(X)                                                                  \
   X(double, k1, 1.0e5, Positive, 0.0, kHuge, "N/m", "k1", true,                                    \
-    "loading (plastic) stiffness, eq. 5 (Table 4 mean; eq. 7 gives k1 = 5 r* p_y)")                 \
+    "loading (plastic) stiffness, eq. 5: Table 4 (from p_y = 100 MPa by eq. 7 with r = 0.2 mm)")                 \
   X(double, k2, 4.0e5, Positive, 0.0, kHuge, "N/m", "k2", true,                                    \
-    "unloading and reloading (elastic) stiffness, eq. 5; e = sqrt(k1/k2), eq. 8")                   \
-  X(double, kc, 600.0, NonNegative, 0.0, kHuge, "N/m", "kc", true, "adhesion stiffness, eq. 5")    \
+    "unloading and reloading (elastic) stiffness, eq. 5: Table 4 (e = sqrt(k1/k2) = 0.5, eq. 8)")                   \
+  X(double, kc, 600.0, NonNegative, 0.0, kHuge, "N/m", "kc", true, "adhesion stiffness, eq. 5: Table 4 (ramped to 0 at bonding)")    \
   X(double, kt_ratio, 1.0, Range, 0.0, 10.0, "-", "kt_ratio", true,                                \
-    "tangential stiffness k_t over k1 (the paper: equal to the normal stiffness)")                 \
-  X(double, mu, 0.5, Range, 0.0, 10.0, "-", "mu", true, "particle-particle friction coefficient, eq. 9") \
-  X(double, mu_wall, 0.15, Range, 0.0, 10.0, "-", "mu_wall", true, "particle-wall friction coefficient") \
-  X(double, rolling, 0.01, Range, 0.0, 1.0, "-", "rolling", true, "rolling friction coefficient m_r, eq. 11") \
+    "tangential stiffness k_t over k1: the paper (section 3.1.1, k_t equal to the normal stiffness)")                 \
+  X(double, mu, 0.5, Range, 0.0, 10.0, "-", "mu", true, "particle-particle friction coefficient mu_pp, eq. 9: Table 4") \
+  X(double, mu_wall, 0.15, Range, 0.0, 10.0, "-", "mu_wall", true, "particle-wall friction coefficient mu_pw: Table 4") \
+  X(double, rolling, 0.01, Range, 0.0, 1.0, "-", "rolling", true, "rolling friction coefficient m_r, eq. 11: Table 4") \
   X(bool, wall_adhesion, false, None, 0.0, 1.0, "-", "wall_adhesion", true,                        \
-    "walls adhere too (off: a withdrawing steel mould must not drag the pellet's skin along)")     \
+    "walls adhere too; ours: off, a withdrawing steel mould must not drag the pellet's skin along")     \
   X(double, wall_stiffness_factor, 2.0, Range, 0.01, 100.0, "-", "wall_stiffness_factor", true,    \
-    "wall contact stiffness over a pair's (eq. 7: r* = r at a flat wall, r/2 for equal spheres)")  \
+    "wall contact stiffness over a pair's; ours: eq. 7 with r* = r at a flat wall, r/2 between equal spheres")  \
   X(double, normal_damping_ratio, 0.0, Range, 0.0, 1.0, "-", "normal_damping_ratio", false,        \
-    "viscous normal damping, fraction of critical on k2 (the paper has none)")                     \
+    "viscous normal damping, fraction of critical on k2: the paper has none (dissipation is hysteretic)")                     \
   X(bool, scale_with_radius, false, None, 0.0, 1.0, "-", "scale_with_radius", false,               \
-    "k1, k2, kc of a pair scaled by 2 r*/r_ref (eq. 7: stiffness proportional to size)")           \
-  X(double, r_ref, 2.0e-4, Positive, 0.0, kHuge, "m", "r_ref", true, "reference radius of that scaling")
+    "k1, k2, kc of a pair scaled by 2 r*/r_ref (eq. 7: stiffness proportional to size); ours: off, Table 4 gives one mean")           \
+  X(double, r_ref, 2.0e-4, Positive, 0.0, kHuge, "m", "r_ref", true, "reference radius of that scaling: Table 4's mean radius")
 
 #define PELLETDEM_CONTACT_ALL_ROWS(X) PELLETDEM_CONTACT_ROWS(X) PELLETDEM_CONTACT_EFFECT_ROWS(X)
 
