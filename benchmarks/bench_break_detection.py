@@ -46,7 +46,8 @@ def main(argv=None) -> int:
     vs = measured.variants()
     vs = [vs[k] for k in np.linspace(0, len(vs) - 1, args.variants).round().astype(int)]
     print(f"preset {preset.name}, break_drop {args.drop}, contact {contact or 'the preset'}")
-    print("variant | test end (dL/D) full / stopped | sigma_f (MPa) full / stopped | dL_f/D full / stopped | time stopped / full")
+    print("variant | test end (dL/D) full / stopped | sigma_f (MPa) full / stopped | dL_f/D full / stopped "
+          "| time stopped / full")
     ratios = []
     for v in vs:
         if cal:

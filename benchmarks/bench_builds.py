@@ -96,8 +96,10 @@ def main(argv=None) -> int:
     first = builds[0][0]
     print(f"# best of {a.rounds} rounds, {a.n} particles, {a.steps} steps:")
     for name, _ in builds:
-        cells = [f"{t} thread(s) {best[(name, t)]['ps'] / 1e6:6.2f} M ({best[(name, t)]['ps'] / best[(first, t)]['ps']:.3f}x {first})"
-                 for t in threads]
+        cells = []
+        for t in threads:
+            ps = best[(name, t)]["ps"]
+            cells.append(f"{t} thread(s) {ps / 1e6:6.2f} M ({ps / best[(first, t)]['ps']:.3f}x {first})")
         print(f"{name:>12}: " + ", ".join(cells))
     return 0
 

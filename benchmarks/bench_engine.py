@@ -64,7 +64,8 @@ def _fill_bed(n: int, seed: int):
     pellet, res = stages.fill(_preset(n), seed=seed, threads=2, progress=False)
     x, r = np.array(pellet.world.x), np.array(pellet.world.r)
     np.savez(path, x=x, r=r)
-    print(f"# filled bed of {n}: {res.steps} steps, {res.wall_time_s:.1f} s, CN {res.scalars['coordination_number']:.2f}",
+    cn = res.scalars["coordination_number"]
+    print(f"# filled bed of {n}: {res.steps} steps, {res.wall_time_s:.1f} s, CN {cn:.2f}",
           flush=True)
     return x, r
 
@@ -238,7 +239,8 @@ def summary(rows: list[dict]) -> list[str]:
         lg = row.get("liggghts_ps_1", float("nan"))
         out.append(f"{row['n']:>7} {row['ps_1']/1e6:>9.2f} {row['ps_2']/1e6:>9.2f} {row['ps_2']/row['ps_1']:>6.2f} "
                    f"{lg/1e6:>11.2f} {row['ps_1']/lg:>13.2f} {row['bytes_per_particle']:>10.0f} "
-                   f"{row.get('compacted_cn', float('nan')):>12.2f} {row.get('compacted_ps_1', float('nan'))/1e6:>8.2f} "
+                   f"{row.get('compacted_cn', float('nan')):>12.2f} "
+                   f"{row.get('compacted_ps_1', float('nan')) / 1e6:>8.2f} "
                    f"{row.get('compacted_ps_2', float('nan'))/1e6:>8.2f}")
 
     def verdict(ok):

@@ -121,10 +121,10 @@ back with ``read_dump_bed``): its linear spring has no plastic part, so it sprin
 back from overlaps that pelletdem's hysteretic contacts hold at rest (10,000 bed:
 CN 4.5 -> 0.3 in 2,000 steps with k_n = k2, -> 1.0 with k_n = k1; at rest again,
 CN 4.5, after 30,000 steps with k_n = k_t = k1, the springs the benchmark uses).
-For like-for-like figures, time pelletdem and LIGGGHTS on the SAME bed.  Either load ``bed.csv`` (``load_bed_csv``) into pelletdem, or
-pass pelletdem's bed to ``run_liggghts_bed(..., bed=(x, r))``; this skips
-settling.  Report the CN with the figures.  ``time_settled_bed(workdir)``
-re-times an already settled bed, for repeats or other thread counts.
+For like-for-like figures, time pelletdem and LIGGGHTS on the SAME bed.  Either load
+``bed.csv`` (``load_bed_csv``) into pelletdem, or pass pelletdem's bed to
+``run_liggghts_bed(..., bed=(x, r))``; this skips settling.  Report the CN with the figures.
+``time_settled_bed(workdir)`` re-times an already settled bed, for repeats or other thread counts.
 
 Timing noise: loop times are wall times.  On a shared machine, check
 ``cpu_share_timed_process``; values well below 1 mean other processes took CPU

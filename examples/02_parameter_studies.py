@@ -87,7 +87,8 @@ def main(argv=None):
     save(fig, "fig10_coordination.png")
 
     fig, (a, b) = plt.subplots(1, 2, figsize=(11, 4))
-    pts = sorted((rec["outputs"]["coordination_number_relaxed"], rec["outputs"]["sigma_f"] / MPA) for rec in by_p.values())
+    pts = sorted((rec["outputs"]["coordination_number_relaxed"], rec["outputs"]["sigma_f"] / MPA)
+                 for rec in by_p.values())
     for sz, rec in by_p.items():
         a.plot(rec["curve"]["dL_D"], np.asarray(rec["curve"]["sigma_1"]) / MPA,
                label=f"{sz} MPa, CN = {rec['outputs']['coordination_number_relaxed']:.2f}")
@@ -104,7 +105,9 @@ def main(argv=None):
     plain = {r: run(r_b=r * UM) for r in radii}
     comp = {r: run(r_b=r * UM, E_b=E_B * (20 / r) ** 2, sigma_c=SIGMA_C * (20 / r) ** 2) for r in radii}
     fig, axs = plt.subplots(1, 2, figsize=(11, 4))
-    for ax, runs, title in ((axs[0], plain, "(a) $E_b$, $\\sigma_c$ fixed"), (axs[1], comp, "(b) $E_b r_b^2$, $\\sigma_c r_b^2$ fixed")):
+    panels = ((axs[0], plain, "(a) $E_b$, $\\sigma_c$ fixed"),
+              (axs[1], comp, "(b) $E_b r_b^2$, $\\sigma_c r_b^2$ fixed"))
+    for ax, runs, title in panels:
         for r, rec in runs.items():
             ax.plot(rec["curve"]["dL_D"], np.asarray(rec["curve"]["sigma_1"]) / MPA, label=f"$r_b$ = {r} µm")
         ax.set_xlabel("$\\Delta L/D$")

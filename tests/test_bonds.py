@@ -358,8 +358,11 @@ def test_scaling_leaves_normal_and_shear_response_unchanged_pair():
         w, _ = heavy_pair(law=law)
         w.set_velocities(np.array([[-0.004, -0.003, 0], [0.004, 0.003, 0]]), np.zeros((2, 3)))
         hist = []
-        steps = run_until_broken(w, 20000, every=50,
-                                 record=lambda w: hist.append((bond0(w)["fn"], *bond0(w)["ft"])))
+
+        def record(w, hist=hist):
+            hist.append((bond0(w)["fn"], *bond0(w)["ft"]))
+
+        steps = run_until_broken(w, 20000, every=50, record=record)
         out.append((steps, np.array(hist), w.broken_bonds()["mode"][0]))
     assert out[0][0] == out[1][0] and out[0][2] == out[1][2]
     np.testing.assert_allclose(out[1][1], out[0][1], rtol=1e-9, atol=1e-15)

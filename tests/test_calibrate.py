@@ -412,8 +412,9 @@ def test_calibrate_variants_machinery(tmp_path):
     recs = [json.loads(f.read_text()) for f in tmp_path.rglob("*.json")]
     bond_presets = [r["spec"]["after_relax"] for r in recs if r["spec"].get("bond")]
     assert bond_presets and all(pr["break_drop"] == pytest.approx(0.7) for pr in bond_presets)
+    both = (measured.variant("oak", 8, 120), measured.variant("pine", 20, 60))
     assert {round(pr["break_from_dLD"], 4) for pr in bond_presets} <= {
-        round(0.5 * (v.dLf_D - 2 * v.dLf_D_sd), 4) for v in (measured.variant("oak", 8, 120), measured.variant("pine", 20, 60))}
+        round(0.5 * (v.dLf_D - 2 * v.dLf_D_sd), 4) for v in both}
     with pytest.raises(ValueError, match="break_drop"):
         C.calibrate_variants([("oak", 8, 120)], "tiny", break_drop=1.5, executor="serial", runner=power_law_runner)
     # everything is cached: a second call runs nothing

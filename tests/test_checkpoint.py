@@ -216,7 +216,8 @@ def test_a_checkpoint_of_another_run_is_refused(tmp_path):
     from pelletdem.result import Result
 
     ck._write(Result(params={}, seed=0, version="x"), checkpoint._pellet_fields(None), None, None)
-    with pytest.raises(checkpoint.CheckpointError, match=r"another run \(seed: 0 in the checkpoint, 1 now\).*--restart"):
+    msg = r"another run \(seed: 0 in the checkpoint, 1 now\).*--restart"
+    with pytest.raises(checkpoint.CheckpointError, match=msg):
         checkpoint.RunCheckpoint(path, {"seed": 1, "preset": "tiny"}).resume()
     assert checkpoint.RunCheckpoint(path, {"seed": 0, "preset": "tiny"}).resume().stages_done == []
     assert checkpoint.RunCheckpoint(tmp_path / "none.h5", {}).resume() is None

@@ -246,7 +246,8 @@ def test_tangential_damping_of_eq10(e):
         s'' + (3.5 gamma_t / m) s' + (3.5 kt / m) s = 0,
     a damped oscillator with w0^2 = 3.5 kt/m and damping ratio
         zeta = 3.5 gamma_t / (2 m w0) = sqrt(3.5) gamma_t / (2 sqrt(m kt)).
-    (kt is the wall contact's: SW times the pair value.) Eq. 10 with m* = m (a wall has infinite mass): gamma_t = 2 sqrt(m kt) / sqrt(1 + (pi/ln e)^2),
+    (kt is the wall contact's: SW times the pair value.) Eq. 10 with m* = m (a wall has
+    infinite mass): gamma_t = 2 sqrt(m kt) / sqrt(1 + (pi/ln e)^2),
     so zeta = sqrt(3.5 / (1 + (pi/ln e)^2)), and successive force maxima shrink by
     exp(-2 pi zeta / sqrt(1 - zeta^2)) one damped period 2 pi / (w0 sqrt(1 - zeta^2)) apart.
     """

@@ -164,8 +164,8 @@ def test_largest_overlap_is_reported_and_nothing_passed_through_a_wall(life):
 
 def test_compaction_inertia_number_is_reported(life):
     st = _stage(life, "compact")
-    I = st.series["inertia_number"]
-    assert I.shape == st.series["sigma_z"].shape
+    inertia = st.series["inertia_number"]
+    assert inertia.shape == st.series["sigma_z"].shape
     assert np.isfinite(st.scalars["inertia_number_at_target"])
     assert 0.0 < st.scalars["inertia_number_at_target"] < 1e-1
 

@@ -2,7 +2,6 @@
 a run that goes wrong raises a SimulationError subclass instead of crashing."""
 
 import math
-import re
 
 import numpy as np
 import pytest

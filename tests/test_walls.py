@@ -279,7 +279,7 @@ def test_walls_do_not_adhere_unless_asked():
                             wall_stiffness_factor=SW)
         w = pd.World(dt=1e-7, contact=law, gravity=(0, 0, 0), skin=2e-5)
         w.add_particles(np.array([[0, 0, 1e-3]]), np.array([R]))
-        lo = w.add_plane("lo", [0, 0, 1e-3 - R], [0, 0, 1])
+        w.add_plane("lo", [0, 0, 1e-3 - R], [0, 0, 1])
         hi = w.add_plane("hi", [0, 0, 1e-3 + R], [0, 0, -1])
         w.set_wall_velocity(hi, [0, 0, -0.02])
         w.run_until(max_steps=100_000, wall_travel_above=(hi, 0.02 * R))

@@ -8,12 +8,18 @@ namespace {
 
 const char* check_name(Check c) {
   switch (c) {
-    case Check::None: return "none";
-    case Check::Range: return "range";
-    case Check::Positive: return "positive";
-    case Check::NonNegative: return "nonnegative";
-    case Check::ZeroOrRange: return "zero_or_range";
-    case Check::WholeRange: return "whole_range";
+    case Check::None:
+      return "none";
+    case Check::Range:
+      return "range";
+    case Check::Positive:
+      return "positive";
+    case Check::NonNegative:
+      return "nonnegative";
+    case Check::ZeroOrRange:
+      return "zero_or_range";
+    case Check::WholeRange:
+      return "whole_range";
   }
   return "?";
 }
@@ -57,15 +63,23 @@ void bind_laws(py::module_& m) {
   py::class_<WorldParams>(m, "WorldParams")
       .def(py::init<>())
       .def_readwrite("dt", &WorldParams::dt)
-      .def_property("gravity", [](const WorldParams& p) { return std::vector<double>{p.gravity.x(), p.gravity.y(), p.gravity.z()}; },
-                    [](WorldParams& p, const std::vector<double>& g) { p.gravity = to_vec3(g, "gravity"); })
+      .def_property(
+          "gravity",
+          [](const WorldParams& p) {
+            return std::vector<double>{p.gravity.x(), p.gravity.y(), p.gravity.z()};
+          },
+          [](WorldParams& p, const std::vector<double>& g) { p.gravity = to_vec3(g, "gravity"); })
       .def_readwrite("density", &WorldParams::density)
       .def_readwrite("density_scale", &WorldParams::density_scale)
       .def_readwrite("skin", &WorldParams::skin)
-      .def_property("box_lo", [](const WorldParams& p) { return std::vector<double>{p.box.lo.x(), p.box.lo.y(), p.box.lo.z()}; },
-                    [](WorldParams& p, const std::vector<double>& g) { p.box.lo = to_vec3(g, "box_lo"); })
-      .def_property("box_hi", [](const WorldParams& p) { return std::vector<double>{p.box.hi.x(), p.box.hi.y(), p.box.hi.z()}; },
-                    [](WorldParams& p, const std::vector<double>& g) { p.box.hi = to_vec3(g, "box_hi"); })
+      .def_property(
+          "box_lo",
+          [](const WorldParams& p) { return std::vector<double>{p.box.lo.x(), p.box.lo.y(), p.box.lo.z()}; },
+          [](WorldParams& p, const std::vector<double>& g) { p.box.lo = to_vec3(g, "box_lo"); })
+      .def_property(
+          "box_hi",
+          [](const WorldParams& p) { return std::vector<double>{p.box.hi.x(), p.box.hi.y(), p.box.hi.z()}; },
+          [](WorldParams& p, const std::vector<double>& g) { p.box.hi = to_vec3(g, "box_hi"); })
       .def_readwrite("threads", &WorldParams::threads)
       .def_readwrite("max_overlap_ratio", &WorldParams::max_overlap_ratio)
       .def_readwrite("sample_interval", &WorldParams::sample_interval)

@@ -56,10 +56,10 @@ py::array view_of(World& w, const T* data, std::size_t n, std::size_t width, py:
     out = py::array_t<double>({N}, {static_cast<py::ssize_t>(sizeof(double))},
                               reinterpret_cast<const double*>(data), base);
   } else {
-    out = py::array_t<double>({N, static_cast<py::ssize_t>(3)},
-                              {static_cast<py::ssize_t>(sizeof(Vec3)),
-                               static_cast<py::ssize_t>(sizeof(double))},
-                              reinterpret_cast<const double*>(data), base);
+    out = py::array_t<double>(
+        {N, static_cast<py::ssize_t>(3)},
+        {static_cast<py::ssize_t>(sizeof(Vec3)), static_cast<py::ssize_t>(sizeof(double))},
+        reinterpret_cast<const double*>(data), base);
   }
   out.attr("flags").attr("writeable") = false;
   return out;

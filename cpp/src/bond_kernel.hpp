@@ -178,7 +178,10 @@ struct BondLanes {
 class BondRecords {
  public:
   explicit BondRecords(Bond* const* g)
-      : g_(g), n_(load_run(g, kRunNormal)), s_(load_run(g, kRunShear)), b_(load_run(g, kRunBend)),
+      : g_(g),
+        n_(load_run(g, kRunNormal)),
+        s_(load_run(g, kRunShear)),
+        b_(load_run(g, kRunBend)),
         k_(load_run(g, kRunStiff)) {}
   L3 np() const { return {n_.c0, n_.c1, n_.c2}; }
   L3 ft() const { return {s_.c0, s_.c1, s_.c2}; }
@@ -301,8 +304,8 @@ PELLETDEM_INLINE Lane bonds_left(bool damage, Id&& id) {
 
 // update_bond on kLanes intact bonds whose pairs are not in the neighbour list, in bond order.
 // Returns false, having changed nothing, when a bond needs the scalar path.
-PELLETDEM_INLINE bool update_bond_group(Bond* const* g, const PosRad* xr, const Motion* mo,
-                                        double dt, bool damage, Load* A) {
+PELLETDEM_INLINE bool update_bond_group(Bond* const* g, const PosRad* xr, const Motion* mo, double dt,
+                                        bool damage, Load* A) {
   Index bi[kLanes], bj[kLanes];
   for (int k = 0; k < kLanes; ++k) {
     bi[k] = g[k]->i;

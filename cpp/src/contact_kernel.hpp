@@ -26,8 +26,7 @@ PELLETDEM_INLINE ContactForce contact_force(Index i, Index j, ContactHistory& h,
                                             const ContactLawParams& cp, double dt_inc, double adh,
                                             PairStats& out) {
   const double ri = p.r[i], rj = p.r[j];
-  ContactKinematics c{g.delta, g.vn, g.vt, g.n, ri * rj / (ri + rj),
-                      p.m[i] * p.m[j] / (p.m[i] + p.m[j])};
+  ContactKinematics c{g.delta, g.vn, g.vt, g.n, ri * rj / (ri + rj), p.m[i] * p.m[j] / (p.m[i] + p.m[j])};
   const ContactForce cf = law.evaluate(c, h, dt_inc, cp.mu, adh);
   ++out.contacts;
   const double ov = g.delta / std::min(ri, rj);
@@ -57,12 +56,11 @@ PELLETDEM_INLINE void contact_one(Index i, Index j, ContactHistory& h, const Par
 // A bonded pair (i, j): its contact force where it touches (`on`) and its bond b, added to A
 // together. Returns true when the bond broke (its share is then left out).
 PELLETDEM_INLINE bool bonded_one(Index i, Index j, bool on, ContactHistory& h, Bond& b, const Particles& p,
-                                 const HystereticLaw& law, const ContactLawParams& cp,
-                                 double dt_inc, double adh, const Motion* mo, Load* A,
-                                 PairStats& out) {
+                                 const HystereticLaw& law, const ContactLawParams& cp, double dt_inc,
+                                 double adh, const Motion* mo, Load* A, PairStats& out) {
   const PairGeometry g = pair_geometry(i, j, p, mo);
-  const ContactForce cf = on ? contact_force(i, j, h, g, p, law, cp, dt_inc, adh, out)
-                             : ContactForce{0.0, Vec3::Zero()};
+  const ContactForce cf =
+      on ? contact_force(i, j, h, g, p, law, cp, dt_inc, adh, out) : ContactForce{0.0, Vec3::Zero()};
   BondLoad bl;
   const bool broke = bond_one(b, g, dt_inc, bl);
   if (broke) bl = BondLoad{0.0, Vec3::Zero(), Vec3::Zero()};
@@ -80,8 +78,8 @@ PELLETDEM_INLINE bool bonded_one(Index i, Index j, bool on, ContactHistory& h, B
 // k_2 is then constant and the stiffness scale 1). Out: the normal force fn, the tangential
 // force ft and the new history (delta0, hft).
 PELLETDEM_INLINE void contact_law_lanes(const PairLanes& q, const L4& hist, const HystereticLaw& law,
-                                        const ContactLawParams& cp, double dt_inc, double adh,
-                                        Lane& fn, L3& ft, Lane& delta0, L3& hft) {
+                                        const ContactLawParams& cp, double dt_inc, double adh, Lane& fn,
+                                        L3& ft, Lane& delta0, L3& hft) {
   const L3& nv = q.n;
   const Lane delta = q.delta;
   const L3& vt = q.vt;
@@ -144,8 +142,8 @@ PELLETDEM_INLINE Lane roll_lanes(const ContactLawParams& cp, Lane fn, Lane r) {
 // forces are added pair by pair in order, so the bits are contact_one's.
 PELLETDEM_INLINE void contact_group(const Index* gi, const Index* gj, ContactHistory* const* gh,
                                     const PosRad* xr, const Motion* mo, const HystereticLaw& law,
-                                    const ContactLawParams& cp, double dt_inc, double adh,
-                                    Load* A, PairStats& out) {
+                                    const ContactLawParams& cp, double dt_inc, double adh, Load* A,
+                                    PairStats& out) {
   static_assert(sizeof(ContactHistory) == 4 * sizeof(double) && offsetof(ContactHistory, ft) == 8,
                 "ContactHistory is (delta0, ft) as four doubles");
   const PairLanes q = pair_lanes(gi, gj, xr, mo);
@@ -168,10 +166,10 @@ PELLETDEM_INLINE void contact_group(const Index* gi, const Index* gj, ContactHis
 // the contact (where the pair touches) and the bond share the pair's kinematics and one load
 // and store per particle. `left`: the bonds' capacity left (bonds_left). Returns false,
 // having changed nothing, when a bond needs the scalar path.
-PELLETDEM_INLINE bool bonded_group(const Index* gi, const Index* gj, ContactHistory* const* gh,
-                                   BondBlock& k, Lane left, const PosRad* xr, const Motion* mo,
-                                   const HystereticLaw& law, const ContactLawParams& cp,
-                                   double dt_inc, double adh, Load* A, PairStats& out) {
+PELLETDEM_INLINE bool bonded_group(const Index* gi, const Index* gj, ContactHistory* const* gh, BondBlock& k,
+                                   Lane left, const PosRad* xr, const Motion* mo, const HystereticLaw& law,
+                                   const ContactLawParams& cp, double dt_inc, double adh, Load* A,
+                                   PairStats& out) {
   const PairLanes q = pair_lanes(gi, gj, xr, mo);
   BondLanes bl;
   if (!bond_lanes(BondSlots(k), q, dt_inc, left, bl)) return false;

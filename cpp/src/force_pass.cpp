@@ -1,9 +1,9 @@
 // The force pass (World::compute_forces): the particle records packed, the pair loop and the
 // bond loop run on the threads, the walls' contacts, and the threads' loads reduced in a fixed
 // order, with the step's closing half kick or left for the next drift pass.
+#include <omp.h>
 #include <algorithm>
 #include <cmath>
-#include <omp.h>
 
 #include "pair_loop.hpp"
 #include "pelletdem/integrate.hpp"
@@ -97,17 +97,18 @@ void World::compute_forces(bool advance, Finish finish) {
                      spin_inv_.data());
 #pragma omp barrier
     }
-    const PairStats ps =
-        bonds_.empty()
-            ? pair_loop_plain(lo, hi, p_, xr_.data(), nbr_, law_, cp, dt_inc, adh, mo_.data(), A,
-                              vector_kernels_)
-            : pair_loop_bonded(lo, hi, p_, xr_.data(), nbr_, law_, cp, dt_inc, adh, mo_.data(), A,
-                               vector_kernels_, BondedPairs{bonds_.data(), slots_.data(), pair_slot_.data(), slot_bond_.data(), &broke_t[tid], bonds_soften_});
+    const PairStats ps = bonds_.empty()
+                             ? pair_loop_plain(lo, hi, p_, xr_.data(), nbr_, law_, cp, dt_inc, adh,
+                                               mo_.data(), A, vector_kernels_)
+                             : pair_loop_bonded(lo, hi, p_, xr_.data(), nbr_, law_, cp, dt_inc, adh,
+                                                mo_.data(), A, vector_kernels_,
+                                                BondedPairs{bonds_.data(), slots_.data(), pair_slot_.data(),
+                                                            slot_bond_.data(), &broke_t[tid], bonds_soften_});
     // A thread's orphan bonds add to its own buffers, so it goes on to them without waiting
     // for the others' pairs; the reduction below waits for all.
     if (n_orphans > 0)
-      bond_loop(bonds_, orphans_.data(), blo, bhi, p_, xr_.data(), mo_.data(), dt_inc,
-                bonds_soften_, A, broke_t[tid], vector_kernels_);
+      bond_loop(bonds_, orphans_.data(), blo, bhi, p_, xr_.data(), mo_.data(), dt_inc, bonds_soften_, A,
+                broke_t[tid], vector_kernels_);
     // The wall contacts of this thread's run of particles go into its own buffer as well.
     if (tid < nt_walls) wall_share(tid, nt_walls, nt_walls == 1 ? 0 : lo, nt_walls == 1 ? n : hi, dt_inc, A);
 #pragma omp barrier
@@ -146,8 +147,8 @@ void World::compute_forces(bool advance, Finish finish) {
     const double half_gap = 0.5 * (dist - p_.r[bond.i] - p_.r[bond.j]);
     const Vec3 centre = p_.x[bond.i] + (p_.r[bond.i] + half_gap) * d / dist;
     // compute_forces runs after step() advanced time_ and step_: they are the breakage time.
-    broken_.push_back(BrokenBond{time_, step_, bond.i, bond.j, centre, bond.mode,
-                                 bond.sigma_max(), bond.tau_max(), marker});
+    broken_.push_back(BrokenBond{time_, step_, bond.i, bond.j, centre, bond.mode, bond.sigma_max(),
+                                 bond.tau_max(), marker});
     bond.fn = 0.0;
     bond.ft.setZero();
     bond.mn = 0.0;
@@ -158,8 +159,9 @@ void World::compute_forces(bool advance, Finish finish) {
 }
 
 LoadSums World::load_sums(int nt) const {
-  return LoadSums{loads_.data(), nt, params_.gravity / params_.density_scale, mo_.data(),
-                  spin_inv_.data(), load_range_.data()};
+  return LoadSums{
+      loads_.data(),     nt, params_.gravity / params_.density_scale, mo_.data(), spin_inv_.data(),
+      load_range_.data()};
 }
 
 void World::finish_pending_kick() {

@@ -22,8 +22,8 @@ double std_normal(std::mt19937_64& rng) {
 double uniform(std::mt19937_64& rng) { return static_cast<double>(rng() >> 11) * 0x1.0p-53; }
 }  // namespace
 
-std::vector<double> truncated_normal_radii(long n, double mean, double sd, double r_min,
-                                           double r_max, std::uint64_t seed) {
+std::vector<double> truncated_normal_radii(long n, double mean, double sd, double r_min, double r_max,
+                                           std::uint64_t seed) {
   require_range("n", static_cast<double>(n), 0, 1e8, "particles");
   require_positive("radius mean", mean, "m");
   require_nonnegative("radius sd", sd, "m");
@@ -41,9 +41,8 @@ std::vector<double> truncated_normal_radii(long n, double mean, double sd, doubl
   return r;
 }
 
-std::vector<Vec3> random_pack_cylinder(std::vector<double>& radii, double cx, double cy,
-                                       double radius, double z_lo, double z_hi,
-                                       std::uint64_t seed, long max_attempts) {
+std::vector<Vec3> random_pack_cylinder(std::vector<double>& radii, double cx, double cy, double radius,
+                                       double z_lo, double z_hi, std::uint64_t seed, long max_attempts) {
   require_positive("fill radius", radius, "m");
   require(z_hi > z_lo, cat("fill region: z_hi = ", z_hi, " m must be > z_lo = ", z_lo, " m"));
   require_range("max_attempts", static_cast<double>(max_attempts), 1, 1e9);
@@ -53,26 +52,23 @@ std::vector<Vec3> random_pack_cylinder(std::vector<double>& radii, double cx, do
     r_max = std::max(r_max, r);
     solid += 4.0 / 3.0 * kPi * r * r * r;
   }
-  require(r_max < radius, cat("largest radius ", r_max, " m does not fit the cylinder of radius ",
-                              radius, " m"));
+  require(r_max < radius,
+          cat("largest radius ", r_max, " m does not fit the cylinder of radius ", radius, " m"));
   const double volume = kPi * radius * radius * (z_hi - z_lo);
   // Random sequential addition jams near a solid fraction of 0.38; beyond ~0.3 it crawls.
   if (solid / volume > 0.30)
-    throw ParameterError(cat("particles do not fit their container: solid fraction ",
-                             solid / volume, " of the fill region exceeds 0.30 (random "
+    throw ParameterError(cat("particles do not fit their container: solid fraction ", solid / volume,
+                             " of the fill region exceeds 0.30 (random "
                              "placement jams near 0.38); allowed fill height >= ",
                              solid / (0.30 * kPi * radius * radius), " m"));
   // Place large spheres first: they are the hardest to fit.
   std::vector<std::size_t> order(radii.size());
   std::iota(order.begin(), order.end(), 0);
-  std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
-    return radii[a] > radii[b];
-  });
+  std::stable_sort(order.begin(), order.end(),
+                   [&](std::size_t a, std::size_t b) { return radii[a] > radii[b]; });
   std::mt19937_64 rng(seed);
   const double cell = 2.0 * r_max;
-  auto key = [&](int a, int b, int c) {
-    return (static_cast<long long>(a) * 100003LL + b) * 100019LL + c;
-  };
+  auto key = [&](int a, int b, int c) { return (static_cast<long long>(a) * 100003LL + b) * 100019LL + c; };
   std::unordered_map<long long, std::vector<std::size_t>> grid;
   std::vector<Vec3> pos(radii.size());
   std::vector<double> placed_r(radii.size());
@@ -110,16 +106,15 @@ std::vector<Vec3> random_pack_cylinder(std::vector<double>& radii, double cx, do
       }
     }
     if (!ok)
-      throw ParameterError(cat("particles do not fit their container: placed ", placed, " of ",
-                               radii.size(), " after ", max_attempts,
+      throw ParameterError(cat("particles do not fit their container: placed ", placed, " of ", radii.size(),
+                               " after ", max_attempts,
                                " attempts for one particle; make the fill region taller"));
   }
   // Sort along z so that neighbours in space are neighbours in memory.
   std::vector<std::size_t> idx(placed);
   std::iota(idx.begin(), idx.end(), 0);
-  std::stable_sort(idx.begin(), idx.end(), [&](std::size_t a, std::size_t b) {
-    return pos[a].z() < pos[b].z();
-  });
+  std::stable_sort(idx.begin(), idx.end(),
+                   [&](std::size_t a, std::size_t b) { return pos[a].z() < pos[b].z(); });
   std::vector<Vec3> out(placed);
   for (std::size_t k = 0; k < placed; ++k) {
     out[k] = pos[idx[k]];

@@ -16,8 +16,8 @@ constexpr long kBlock = 32;
 
 // The rest of a block's records once mo[i] holds v, m and w and len[k] = |w|^2: zeroed Load,
 // (x, r), and eq. 11's cap |w| I / dt and 1 / |w|.
-PELLETDEM_INLINE void pack_block(long b, long e, const Particles& p, double inv_dt, bool rolling,
-                                  Load* A0, PosRad* xr, Motion* mo, double* spin_inv, double* len) {
+PELLETDEM_INLINE void pack_block(long b, long e, const Particles& p, double inv_dt, bool rolling, Load* A0,
+                                 PosRad* xr, Motion* mo, double* spin_inv, double* len) {
   alignas(32) double inertia[kBlock], cap[kBlock], inv[kBlock];
   const int nb = static_cast<int>(e - b);
   for (int k = 0; k < nb; ++k) {
@@ -63,8 +63,8 @@ PELLETDEM_INLINE void pack_block(long b, long e, const Particles& p, double inv_
 #endif
 
 PELLETDEM_CLONES
-void pack_particles(long lo, long hi, const Particles& p, double inv_dt, bool rolling, Load* A0,
-                    PosRad* xr, Motion* mo, double* spin_inv) {
+void pack_particles(long lo, long hi, const Particles& p, double inv_dt, bool rolling, Load* A0, PosRad* xr,
+                    Motion* mo, double* spin_inv) {
   alignas(32) double len[kBlock];
   for (long b = lo; b < hi; b += kBlock) {
     const long e = std::min(hi, b + kBlock);
@@ -92,9 +92,8 @@ void reduce_loads(long lo, long hi, const LoadSums& s, double half_dt, Particles
 }
 
 PELLETDEM_CLONES
-DriftResult kick_drift_pack(long lo, long hi, double dt, bool rolling, Particles& p,
-                            const Vec3* x_build, Load* A0, PosRad* xr, Motion* mo,
-                            double* spin_inv, const LoadSums* pending) {
+DriftResult kick_drift_pack(long lo, long hi, double dt, bool rolling, Particles& p, const Vec3* x_build,
+                            Load* A0, PosRad* xr, Motion* mo, double* spin_inv, const LoadSums* pending) {
   DriftResult out;
   const double inv_dt = 1.0 / dt;
   alignas(32) double len[kBlock];

@@ -73,13 +73,10 @@ PELLETDEM_INLINE L3 gather3(const Vec3* a, const Index* idx) {
   const Lane xy13 = __builtin_shufflevector(load2(p1), load2(p3), 0, 1, 2, 3);
   const Lane yz02 = __builtin_shufflevector(load2(p0 + 1), load2(p2 + 1), 0, 1, 2, 3);
   const Lane yz13 = __builtin_shufflevector(load2(p1 + 1), load2(p3 + 1), 0, 1, 2, 3);
-  return {__builtin_shufflevector(xy02, xy13, 0, 4, 2, 6),
-          __builtin_shufflevector(xy02, xy13, 1, 5, 3, 7),
+  return {__builtin_shufflevector(xy02, xy13, 0, 4, 2, 6), __builtin_shufflevector(xy02, xy13, 1, 5, 3, 7),
           __builtin_shufflevector(yz02, yz13, 1, 5, 3, 7)};
 }
-PELLETDEM_INLINE L3 gather3(const std::vector<Vec3>& a, const Index* idx) {
-  return gather3(a.data(), idx);
-}
+PELLETDEM_INLINE L3 gather3(const std::vector<Vec3>& a, const Index* idx) { return gather3(a.data(), idx); }
 // Rows of four doubles (one per bond) to columns (one per field), and back: a 4x4 transpose.
 struct L4 {
   Lane c0, c1, c2, c3;

@@ -141,13 +141,11 @@ void World::clear_samples() {
 void World::record_sample() {
   long intact = 0;
   for (const Bond& b : bonds_) intact += b.mode == BondMode::Intact;
-  samples_.push_back(Sample{time_, kinetic_energy(), coordination_number(), max_overlap_,
-                            load_marker(), n_contacts_, intact,
-                            static_cast<long>(broken_.size())});
+  samples_.push_back(Sample{time_, kinetic_energy(), coordination_number(), max_overlap_, load_marker(),
+                            n_contacts_, intact, static_cast<long>(broken_.size())});
   for (int k = 0; k < wall_count(); ++k) {
     const Wall& w = walls_[k];
-    wall_samples_[k].push_back(
-        WallSample{time_, w.force, w.normal_force(), w.point, w.radius, w.travel});
+    wall_samples_[k].push_back(WallSample{time_, w.force, w.normal_force(), w.point, w.radius, w.travel});
   }
 }
 

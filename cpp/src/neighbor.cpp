@@ -1,24 +1,24 @@
 #include "pelletdem/neighbor.hpp"
 
+#include <omp.h>
 #include <algorithm>
 #include <cmath>
-#include <omp.h>
 
 #include "pelletdem/errors.hpp"
 
 namespace pelletdem {
 
-void NeighborList::build(const Particles& p, const Box& box, double skin, double r_max,
-                         long step, int threads) {
+void NeighborList::build(const Particles& p, const Box& box, double skin, double r_max, long step,
+                         int threads) {
   const std::size_t n = p.size();
   for (std::size_t i = 0; i < n; ++i) {
     if (!box.contains(p.x[i]))
-      throw ParticleEscapedError(cat(
-          "particle ", i, " at (", p.x[i].x(), ", ", p.x[i].y(), ", ", p.x[i].z(),
-          ") m left the domain box [", box.lo.x(), ", ", box.hi.x(), "] x [", box.lo.y(), ", ",
-          box.hi.y(), "] x [", box.lo.z(), ", ", box.hi.z(), "] at step ", step,
-          ": a wall let it through or it was thrown out; likely causes: time step too large or "
-          "loading speed too high"));
+      throw ParticleEscapedError(
+          cat("particle ", i, " at (", p.x[i].x(), ", ", p.x[i].y(), ", ", p.x[i].z(),
+              ") m left the domain box [", box.lo.x(), ", ", box.hi.x(), "] x [", box.lo.y(), ", ",
+              box.hi.y(), "] x [", box.lo.z(), ", ", box.hi.z(), "] at step ", step,
+              ": a wall let it through or it was thrown out; likely causes: time step too large or "
+              "loading speed too high"));
   }
   // Cells no smaller than the largest possible cutoff, so 27 cells hold every neighbour.
   const double cell = 2.0 * r_max + skin;
@@ -32,9 +32,9 @@ void NeighborList::build(const Particles& p, const Box& box, double skin, double
   const int nx = cells_along(ext.x()), ny = cells_along(ext.y()), nz = cells_along(ext.z());
   constexpr double kMaxCells = 1 << 24;
   if (static_cast<double>(nx) * ny * nz > kMaxCells)
-    throw ParameterError(cat("the domain box [", box.lo.transpose(), "] .. [", box.hi.transpose(),
-                             "] m is ", static_cast<double>(nx) * ny * nz, " neighbour cells of ",
-                             cell, " m (2 r_max + skin): allowed at most ", kMaxCells,
+    throw ParameterError(cat("the domain box [", box.lo.transpose(), "] .. [", box.hi.transpose(), "] m is ",
+                             static_cast<double>(nx) * ny * nz, " neighbour cells of ", cell,
+                             " m (2 r_max + skin): allowed at most ", kMaxCells,
                              " cells; shrink the box to the particles' reach"));
   const double sx = nx / ext.x(), sy = ny / ext.y(), sz = nz / ext.z();
   const std::size_t ncell = static_cast<std::size_t>(nx) * ny * nz;
@@ -137,8 +137,7 @@ void NeighborList::build(const Particles& p, const Box& box, double skin, double
 void NeighborList::mark_live() {
   ++generation;
   live.resize(history.size());
-  for (std::size_t k = 0; k < history.size(); ++k)
-    live[k] = !history[k].blank();
+  for (std::size_t k = 0; k < history.size(); ++k) live[k] = !history[k].blank();
 }
 
 std::vector<std::pair<Index, Index>> NeighborList::brute_force(const Particles& p, double skin) {

@@ -101,8 +101,8 @@ PELLETDEM_INLINE PairLanes pair_lanes(const Index* gi, const Index* gj, const Po
 }
 
 // add_pair_load of four pairs q.
-PELLETDEM_INLINE void add_pair_loads(Load* A, const Index* gi, const Index* gj, const PairLanes& q,
-                                     Lane fn, const L3& ft, const L3& moment, Lane roll_i = Lane{},
+PELLETDEM_INLINE void add_pair_loads(Load* A, const Index* gi, const Index* gj, const PairLanes& q, Lane fn,
+                                     const L3& ft, const L3& moment, Lane roll_i = Lane{},
                                      Lane roll_j = Lane{}) {
   const L3& n = q.n;
   const L3 f{fn * n.x + ft.x, fn * n.y + ft.y, fn * n.z + ft.z};

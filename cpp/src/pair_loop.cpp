@@ -50,9 +50,7 @@ PELLETDEM_INLINE PairStats pair_loop_body(long lo, long hi, const Particles& p, 
     if (!on && (live[k] & kTouch)) H[k] = ContactHistory{};
     live[k] = static_cast<std::uint8_t>(on | (live[k] & kBond));
   };
-  auto one = [&](Index k) {
-    contact_one(I[k], J[k], H[k], p, law, cp, dt_inc, adh, mo, A, out);
-  };
+  auto one = [&](Index k) { contact_one(I[k], J[k], H[k], p, law, cp, dt_inc, adh, mo, A, out); };
   // A bonded pair, touching or not, its bond's state taken from its slot and put back; a bond
   // that broke is noted (its record then holds its last state) and its pair is no longer bonded.
   auto bonded = [&](Index k) {
@@ -149,8 +147,10 @@ PELLETDEM_INLINE PairStats pair_loop_body(long lo, long hi, const Particles& p, 
       }
       int used = kLanes;
       if (c == 0) {
-        if (lanes) contact_group(gi, gj, gh, xr, mo, law, cp, dt_inc, adh, A, out);
-        else for (int l = 0; l < kLanes; ++l) one(e[l]);
+        if (lanes)
+          contact_group(gi, gj, gh, xr, mo, law, cp, dt_inc, adh, A, out);
+        else
+          for (int l = 0; l < kLanes; ++l) one(e[l]);
       } else if constexpr (kBonded) {
         // Four pairs whose bonds fill one block go together; otherwise the first goes alone.
         // A queue's slots rise with the list (map_bonds numbers each run in list order), so
@@ -161,8 +161,10 @@ PELLETDEM_INLINE PairStats pair_loop_body(long lo, long hi, const Particles& p, 
           bonded(e[0]);
           used = 1;
         } else {
-          const Lane left = bonds_left(bp.damage, [&](int l) -> const Bond& { return bp.bonds[bp.slot_bond[s0 + l]]; });
-          if (!lanes || !bonded_group(gi, gj, gh, bp.slots[s0 / kLanes], left, xr, mo, law, cp, dt_inc, adh, A, out))
+          const Lane left =
+              bonds_left(bp.damage, [&](int l) -> const Bond& { return bp.bonds[bp.slot_bond[s0 + l]]; });
+          if (!lanes ||
+              !bonded_group(gi, gj, gh, bp.slots[s0 / kLanes], left, xr, mo, law, cp, dt_inc, adh, A, out))
             for (int l = 0; l < kLanes; ++l) bonded(e[l]);
         }
       }
@@ -198,19 +200,17 @@ PELLETDEM_INLINE PairStats pair_loop_body(long lo, long hi, const Particles& p, 
 __attribute__((target_clones("arch=x86-64-v4", "avx2", "default")))
 #endif
 PairStats pair_loop_plain(long lo, long hi, const Particles& p, const PosRad* xr, NeighborList& nbr,
-                          const HystereticLaw& law, const ContactLawParams& cp, double dt_inc,
-                          double adh, const Motion* mo, Load* A, bool vector_kernel) {
-  return pair_loop_body<false>(lo, hi, p, xr, nbr, law, cp, dt_inc, adh, mo, A, vector_kernel,
-                               BondedPairs{});
+                          const HystereticLaw& law, const ContactLawParams& cp, double dt_inc, double adh,
+                          const Motion* mo, Load* A, bool vector_kernel) {
+  return pair_loop_body<false>(lo, hi, p, xr, nbr, law, cp, dt_inc, adh, mo, A, vector_kernel, BondedPairs{});
 }
 
 #if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && defined(__linux__)
 __attribute__((target_clones("arch=x86-64-v4", "avx2", "default")))
 #endif
 PairStats pair_loop_bonded(long lo, long hi, const Particles& p, const PosRad* xr, NeighborList& nbr,
-                           const HystereticLaw& law, const ContactLawParams& cp, double dt_inc,
-                           double adh, const Motion* mo, Load* A, bool vector_kernel,
-                           const BondedPairs& bp) {
+                           const HystereticLaw& law, const ContactLawParams& cp, double dt_inc, double adh,
+                           const Motion* mo, Load* A, bool vector_kernel, const BondedPairs& bp) {
   return pair_loop_body<true>(lo, hi, p, xr, nbr, law, cp, dt_inc, adh, mo, A, vector_kernel, bp);
 }
 
@@ -225,8 +225,8 @@ PairStats pair_loop_bonded(long lo, long hi, const Particles& p, const PosRad* x
 __attribute__((target_clones("arch=x86-64-v4", "avx2", "default")))
 #endif
 void bond_loop(std::vector<Bond>& bonds, const Index* list, long lo, long hi, const Particles& p,
-               const PosRad* xr, const Motion* mo, double dt, bool damage, Load* A,
-               std::vector<long>& broke, bool vector_kernel) {
+               const PosRad* xr, const Motion* mo, double dt, bool damage, Load* A, std::vector<long>& broke,
+               bool vector_kernel) {
   auto one = [&](long b) {
     if (update_bond(bonds[b], p, mo, dt, A)) broke.push_back(b);
   };

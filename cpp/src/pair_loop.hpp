@@ -28,15 +28,14 @@ struct BondedPairs {
 
 // The listed pairs of particles [lo, hi), without bonds and with them (bp).
 PairStats pair_loop_plain(long lo, long hi, const Particles& p, const PosRad* xr, NeighborList& nbr,
-                          const HystereticLaw& law, const ContactLawParams& cp, double dt_inc,
-                          double adh, const Motion* mo, Load* A, bool vector_kernel);
+                          const HystereticLaw& law, const ContactLawParams& cp, double dt_inc, double adh,
+                          const Motion* mo, Load* A, bool vector_kernel);
 PairStats pair_loop_bonded(long lo, long hi, const Particles& p, const PosRad* xr, NeighborList& nbr,
-                           const HystereticLaw& law, const ContactLawParams& cp, double dt_inc,
-                           double adh, const Motion* mo, Load* A, bool vector_kernel,
-                           const BondedPairs& bp);
+                           const HystereticLaw& law, const ContactLawParams& cp, double dt_inc, double adh,
+                           const Motion* mo, Load* A, bool vector_kernel, const BondedPairs& bp);
 // The bonds list[lo, hi) whose pairs are not in the neighbour list; broken ones into `broke`.
 void bond_loop(std::vector<Bond>& bonds, const Index* list, long lo, long hi, const Particles& p,
-               const PosRad* xr, const Motion* mo, double dt, bool damage, Load* A,
-               std::vector<long>& broke, bool vector_kernel);
+               const PosRad* xr, const Motion* mo, double dt, bool damage, Load* A, std::vector<long>& broke,
+               bool vector_kernel);
 
 }  // namespace pelletdem

@@ -1,8 +1,8 @@
 // Stepping: the neighbour list kept valid, walls moved, a step (velocity Verlet) and runs
 // until a stop condition fires, with the guards that stop a run that went wrong.
+#include <omp.h>
 #include <algorithm>
 #include <cmath>
-#include <omp.h>
 
 #include "pelletdem/errors.hpp"
 #include "pelletdem/integrate.hpp"
@@ -50,8 +50,7 @@ void World::move_walls() {
     if (!w.active) continue;
     if (w.servo && w.kind == WallKind::Plane) {
       const double err = w.servo_force - w.normal_force();
-      const double speed =
-          std::clamp(w.servo_gain * err, -w.servo_max_speed, w.servo_max_speed);
+      const double speed = std::clamp(w.servo_gain * err, -w.servo_max_speed, w.servo_max_speed);
       w.velocity = speed * w.normal;
     }
     w.point += w.velocity * dt;
@@ -59,8 +58,9 @@ void World::move_walls() {
     if (w.kind == WallKind::Cylinder) {
       w.radius += w.radius_rate * dt;
       if (!(w.radius > 0.0))
-        throw SimulationError(cat("wall '", w.name, "': cylinder radius fell to ", w.radius,
-                                  " m at step ", step_, "; likely cause: radius_rate too negative "
+        throw SimulationError(cat("wall '", w.name, "': cylinder radius fell to ", w.radius, " m at step ",
+                                  step_,
+                                  "; likely cause: radius_rate too negative "
                                   "for the run's length"));
       moved += std::abs(w.radius_rate) * dt;
       w.travel -= w.radius_rate * dt;
@@ -91,9 +91,8 @@ void World::check_guards() {
     }
   }
   if (worst > params_.max_overlap_ratio)
-    throw OverlapError(cat("overlap / radius = ", worst, " ", where, " at particle ", who,
-                           ", step ", step_, " (t = ", time_, " s) exceeds max_overlap_ratio = ",
-                           params_.max_overlap_ratio,
+    throw OverlapError(cat("overlap / radius = ", worst, " ", where, " at particle ", who, ", step ", step_,
+                           " (t = ", time_, " s) exceeds max_overlap_ratio = ", params_.max_overlap_ratio,
                            "; likely causes: loading speed too high, stiffness too low for the "
                            "target stress, or time step too large"));
 }
@@ -115,8 +114,8 @@ void World::advance(bool defer) {
     const int tid = omp_get_thread_num();
     long lo, hi;
     static_share(n, nt, tid, lo, hi);
-    drift_t[tid] = kick_drift_pack(lo, hi, dt, rolling, p_, x_build_.data(), loads_[0].data(),
-                                   xr_.data(), mo_.data(), spin_inv_.data(), pending);
+    drift_t[tid] = kick_drift_pack(lo, hi, dt, rolling, p_, x_build_.data(), loads_[0].data(), xr_.data(),
+                                   mo_.data(), spin_inv_.data(), pending);
   }
   kick_pending_ = false;
   double max_disp2 = 0.0;
@@ -129,7 +128,8 @@ void World::advance(bool defer) {
   forces_valid_ = false;
   if (bad >= 0)
     throw NonFiniteError(cat("particle ", bad, " has a non-finite position at step ", step_ + 1,
-                             " (t = ", time_ + dt, " s): its velocity or force became NaN or "
+                             " (t = ", time_ + dt,
+                             " s): its velocity or force became NaN or "
                              "infinite; likely causes: time step too large, loading speed too "
                              "high, or contact or bond parameters far outside their range"));
   move_walls();
@@ -170,13 +170,13 @@ RunOutcome World::run_until(const std::vector<StopCondition>& conds, long max_st
   for (const StopCondition& c : conds) {
     require(std::isfinite(c.value), "stop condition value must be finite");
     require(c.check_interval >= 1, "stop condition check_interval must be >= 1 step");
-    const bool needs_wall = c.kind == StopKind::WallForceAbove ||
-                            c.kind == StopKind::WallForceBelow ||
+    const bool needs_wall = c.kind == StopKind::WallForceAbove || c.kind == StopKind::WallForceBelow ||
                             c.kind == StopKind::WallTravelAbove;
     if (needs_wall) require_range("stop condition wall", c.wall, 0, wall_count() - 1);
     if (c.kind == StopKind::LoadDropBelow) {
       require(c.value > 0.0 && c.value < 1.0,
-              cat("load_drop_below = ", c.value, " is out of range: allowed 0 < value < 1 (fraction of the peak)"));
+              cat("load_drop_below = ", c.value,
+                  " is out of range: allowed 0 < value < 1 (fraction of the peak)"));
       require(std::any_of(walls_.begin(), walls_.end(), [](const Wall& w) { return w.load_wall; }),
               "load_drop_below needs load walls (set_load_walls) and a tracked peak (track_load_peak)");
     }
@@ -206,8 +206,12 @@ RunOutcome World::run_steps_until(const std::vector<StopCondition>& conds, long 
       if (step_ % c.check_interval != 0) continue;
       bool hit = false;
       switch (c.kind) {
-        case StopKind::Time: hit = time_ >= c.value; break;
-        case StopKind::Steps: hit = out.steps >= c.value; break;
+        case StopKind::Time:
+          hit = time_ >= c.value;
+          break;
+        case StopKind::Steps:
+          hit = out.steps >= c.value;
+          break;
         case StopKind::KineticEnergyBelow:
           finish_pending_kick();
           hit = kinetic_energy() < c.value;
@@ -216,11 +220,21 @@ RunOutcome World::run_steps_until(const std::vector<StopCondition>& conds, long 
           finish_pending_kick();
           hit = internal_kinetic_energy() < c.value;
           break;
-        case StopKind::WallForceAbove: hit = walls_[c.wall].normal_force() >= c.value; break;
-        case StopKind::WallForceBelow: hit = walls_[c.wall].normal_force() <= c.value; break;
-        case StopKind::WallTravelAbove: hit = walls_[c.wall].travel >= c.value; break;
-        case StopKind::LoadMarkerAbove: hit = load_marker() >= c.value; break;
-        case StopKind::LoadDropBelow: hit = load_peak_ > 0.0 && load_smoothed_ <= c.value * load_peak_; break;
+        case StopKind::WallForceAbove:
+          hit = walls_[c.wall].normal_force() >= c.value;
+          break;
+        case StopKind::WallForceBelow:
+          hit = walls_[c.wall].normal_force() <= c.value;
+          break;
+        case StopKind::WallTravelAbove:
+          hit = walls_[c.wall].travel >= c.value;
+          break;
+        case StopKind::LoadMarkerAbove:
+          hit = load_marker() >= c.value;
+          break;
+        case StopKind::LoadDropBelow:
+          hit = load_peak_ > 0.0 && load_smoothed_ <= c.value * load_peak_;
+          break;
       }
       if (hit) {
         out.condition = static_cast<int>(k);

@@ -20,8 +20,13 @@ WorldState World::save_state() const {
   s.load_smoothing = load_smoothing_;
   s.load_smoothed = load_smoothed_;
   s.forces_valid = forces_valid_;
-  s.x = p_.x; s.v = p_.v; s.w = p_.w; s.f = p_.f; s.t = p_.t;
-  s.r = p_.r; s.m = p_.m;
+  s.x = p_.x;
+  s.v = p_.v;
+  s.w = p_.w;
+  s.f = p_.f;
+  s.t = p_.t;
+  s.r = p_.r;
+  s.m = p_.m;
   if (list_valid_) s.x_build = x_build_;
   for (std::size_t i = 0; i + 1 < nbr_.start.size(); ++i)
     for (Index k = nbr_.start[i]; k < nbr_.start[i + 1]; ++k) {
@@ -43,11 +48,10 @@ WorldState World::save_state() const {
 
 void World::load_state(const WorldState& s) {
   const std::size_t n = s.r.size();
-  require(s.x.size() == n && s.v.size() == n && s.w.size() == n && s.f.size() == n &&
-              s.t.size() == n && s.m.size() == n,
+  require(s.x.size() == n && s.v.size() == n && s.w.size() == n && s.f.size() == n && s.t.size() == n &&
+              s.m.size() == n,
           "state: particle arrays must all have the same length");
-  require(s.ci.size() == s.cj.size() && s.ci.size() == s.c_delta0.size() &&
-              s.ci.size() == s.c_ft.size(),
+  require(s.ci.size() == s.cj.size() && s.ci.size() == s.c_delta0.size() && s.ci.size() == s.c_ft.size(),
           "state: contact arrays must all have the same length");
   require(*views_ == 0, "cannot load a state while numpy views of the particle arrays are alive");
   for (std::size_t k = 0; k < n; ++k) {
@@ -63,7 +67,13 @@ void World::load_state(const WorldState& s) {
     for (const WallContact& c : w.contacts) require(c.i < n, "state: a wall contact has bad indices");
   }
   Particles p;
-  p.x = s.x; p.v = s.v; p.w = s.w; p.f = s.f; p.t = s.t; p.r = s.r; p.m = s.m;
+  p.x = s.x;
+  p.v = s.v;
+  p.w = s.w;
+  p.f = s.f;
+  p.t = s.t;
+  p.r = s.r;
+  p.m = s.m;
   p.inv_m.resize(n);
   p.inv_i.resize(n);
   r_max_ = 0.0;

@@ -36,7 +36,8 @@ void World::wall_share(int tid, int nt_walls, long p_lo, long p_hi, double dt_in
     // The contacts are in particle order: those of particles [p_lo, p_hi).
     auto first_of = [&](long i) {
       return std::lower_bound(w.contacts.begin(), w.contacts.end(), i,
-                              [](const WallContact& c, long v) { return c.i < v; }) - w.contacts.begin();
+                              [](const WallContact& c, long v) { return c.i < v; }) -
+             w.contacts.begin();
     };
     const long lo = first_of(p_lo), hi = first_of(p_hi);
     WallPart& part = wall_part_[static_cast<std::size_t>(wk) * nt_walls + tid];
@@ -53,7 +54,13 @@ void World::wall_share(int tid, int nt_walls, long p_lo, long p_hi, double dt_in
       const double a = p_.r[i] - delta;  // lever arm to the contact point on the wall
       const Vec3 v_rel = mo_[i].v() - a * mo_[i].w().cross(n_into) - w.surface_velocity(n_into);
       const double vn = v_rel.dot(n_into);
-      ContactKinematics c{delta, vn, v_rel - vn * n_into, n_into, p_.r[i], p_.m[i], true,
+      ContactKinematics c{delta,
+                          vn,
+                          v_rel - vn * n_into,
+                          n_into,
+                          p_.r[i],
+                          p_.m[i],
+                          true,
                           law_.wall_load_cap(p_.r[i], w.crushable)};
       const ContactForce cf = law_.evaluate(c, wc.h, dt_inc, cp.mu_wall, adh);
       const Vec3 fp = cf.fn * n_into + cf.ft;

@@ -1,9 +1,9 @@
 // Building a world: its parameters checked, particles and walls added, its settings changed.
 #include "pelletdem/world.hpp"
 
+#include <omp.h>
 #include <algorithm>
 #include <cmath>
-#include <omp.h>
 
 #include "pelletdem/errors.hpp"
 #include "pelletdem/integrate.hpp"
@@ -25,8 +25,7 @@ void WorldParams::validate() const {
   contact.validate();
 }
 
-World::World(const WorldParams& params)
-    : r_max_(0.0), params_(params), law_(params.contact) {
+World::World(const WorldParams& params) : r_max_(0.0), params_(params), law_(params.contact) {
   params_.validate();
 }
 
@@ -90,8 +89,8 @@ void World::set_sample_interval(long n) {
 }
 
 void World::add_particles(const std::vector<Vec3>& x, const std::vector<double>& r) {
-  require(x.size() == r.size(), cat("positions (", x.size(), ") and radii (", r.size(),
-                                    ") must have the same length"));
+  require(x.size() == r.size(),
+          cat("positions (", x.size(), ") and radii (", r.size(), ") must have the same length"));
   require(*views_ == 0,
           "cannot add particles while numpy views of the particle arrays are alive: delete "
           "them (or copy them) first, adding particles moves the arrays");
@@ -99,15 +98,13 @@ void World::add_particles(const std::vector<Vec3>& x, const std::vector<double>&
   for (std::size_t k = 0; k < x.size(); ++k) {
     if (!(r[k] > 0.0) || !std::isfinite(r[k]))
       throw ParameterError(cat("radius[", k, "] = ", r[k], " m: radii must be finite and > 0"));
-    if (!x[k].allFinite())
-      throw ParameterError(cat("position[", k, "] is not finite"));
+    if (!x[k].allFinite()) throw ParameterError(cat("position[", k, "] is not finite"));
     if (!params_.box.contains(x[k])) {
       // Name the allowed range: the box, coordinate by coordinate.
       const Box& b = params_.box;
       throw ParameterError(cat("position[", k, "] = (", x[k].x(), ", ", x[k].y(), ", ", x[k].z(),
-                               ") m lies outside the domain box: allowed [", b.lo.x(), ", ",
-                               b.hi.x(), "] x [", b.lo.y(), ", ", b.hi.y(), "] x [", b.lo.z(),
-                               ", ", b.hi.z(), "] m"));
+                               ") m lies outside the domain box: allowed [", b.lo.x(), ", ", b.hi.x(),
+                               "] x [", b.lo.y(), ", ", b.hi.y(), "] x [", b.lo.z(), ", ", b.hi.z(), "] m"));
     }
   }
   const double rho = params_.density * params_.density_scale;
@@ -198,13 +195,12 @@ double World::critical_time_step() const {
 void World::validate_time_step() const {
   const double dtc = critical_time_step();
   if (params_.dt > dtc)
-    throw ParameterError(cat("dt = ", params_.dt, " s is above the stability limit of the "
-                             "stiffest contact: allowed 0 < dt <= ", dtc,
-                             " s (2 sqrt(m_min / k_max)); the paper uses about 0.1 of it"));
+    throw ParameterError(cat("dt = ", params_.dt,
+                             " s is above the stability limit of the "
+                             "stiffest contact: allowed 0 < dt <= ",
+                             dtc, " s (2 sqrt(m_min / k_max)); the paper uses about 0.1 of it"));
 }
 
-double World::effective_skin() const {
-  return params_.skin > 0.0 ? params_.skin : 0.1 * r_max_;
-}
+double World::effective_skin() const { return params_.skin > 0.0 ? params_.skin : 0.1 * r_max_; }
 
 }  // namespace pelletdem

@@ -99,7 +99,8 @@ void rolling_friction_stops_a_held_spin() {
   const double rate = 3.0 * p.rolling * (p.k1 * delta) * kR / inertia;
   const long steps = static_cast<long>(0.5 * w0 / rate / w.params().dt);
   w.run(steps);
-  expect(close(w.particles().w[0].z(), w0 - rate * w.time(), 1e-9), "held sphere spins down at 3 m_r f r / I");
+  expect(close(w.particles().w[0].z(), w0 - rate * w.time(), 1e-9),
+         "held sphere spins down at 3 m_r f r / I");
   w.run(2 * steps);
   expect(std::abs(w.particles().w[0].z()) < 1e-12 * w0 && w.particles().w[0].z() >= -1e-12 * w0,
          "held sphere stops and stays stopped");

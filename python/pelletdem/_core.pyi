@@ -196,7 +196,8 @@ class World:
     def clone(self) -> World:
         """Deep copy of the whole state (particles, contact history, walls, bonds)."""
     def sort_particles(self) -> _IndexArray:
-        """Renumber the particles in Morton order of their neighbour cells; returns the old index of each new particle."""
+        """Renumber the particles in Morton order of their neighbour cells; returns the old index
+        of each new particle."""
 
     # state
     def get_state(self) -> dict[str, Any]:
@@ -336,7 +337,8 @@ class World:
     def load_smoothed(self) -> float:
         """load_force averaged over track_load_peak's smoothing_steps, N."""
     def track_load_peak(self, from_marker: float, smoothing_steps: float = 1.0) -> None:
-        """Average the load force over ~smoothing_steps steps and keep its peak from the load marker from_marker (m) on, for the load_drop_below stop (inf: stop keeping them)."""
+        """Average the load force over ~smoothing_steps steps and keep its peak from the load
+        marker from_marker (m) on, for the load_drop_below stop (inf: stop keeping them)."""
     def critical_time_step(self) -> float:
         """Stability limit of the stiffest contact on the lightest particle, s."""
     @property

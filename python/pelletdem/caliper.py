@@ -18,8 +18,9 @@ the true volume is known, to 0.1 % (quick pellet at 120 MPa; the outermost exten
 - ``depth``: how far each particle's centre lies below the enclosed surface, m. The *bulk*
   coordination number averages over the particles at least ``BULK_DEPTH_DIAMETERS`` mean
   particle diameters deep (in a pellet too small for that, over its deeper half): the surface
-  layer, where part of a particle's neighbours are missing, is left out. The *core density* is the mass of those particles over the volume
-  of that deep region: the interior's density, free of any surface definition.
+  layer, where part of a particle's neighbours are missing, is left out. The *core density*
+  is the mass of those particles over the volume of that deep region: the interior's density,
+  free of any surface definition.
 - The outermost extents (the highest particle top to the lowest bottom, the widest particle
   edge from the axis) are kept as ``*_extent``: one protruding sphere sets them.
 """

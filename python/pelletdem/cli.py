@@ -18,7 +18,6 @@ import os
 import sys
 import time
 
-
 # The arguments that define a run: a checkpoint made with other values is not resumed.
 RUN_ARGS = ("preset", "material", "mc", "sigma_z", "seed", "threads", "particles", "E_b", "sigma_c",
             "tau_c", "r_b", "max_dld", "break_drop")

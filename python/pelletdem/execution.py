@@ -256,7 +256,7 @@ class Evaluator:
         try:
             self.cache.put(rec)
         except Exception as e:  # noqa: BLE001 (a full disk must not lose the result)
-            warnings.warn(f"could not write cache record {key}: {e}")
+            warnings.warn(f"could not write cache record {key}: {e}", stacklevel=2)
         with self._lock:
             self.n_relaxations += 0 if rec.get("relaxed_reused") else 1
             self.sim_time_s += float(rec.get("wall_time_s", 0.0))

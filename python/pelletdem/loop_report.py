@@ -149,7 +149,8 @@ def write_report(res: LoopResult, out_dir: str, title: str = "Discrepancy loop")
     L += ["    " + s for s in res.residual_before.lines()]
     L += ["", f"![residuals]({os.path.basename(figs['residual'])})", "", "## Candidate effects", ""]
     if res.candidates:
-        L += ["| effect | law parameter | explained | refit held-out chi2/n | BIC | outcome |", "|---|---|---|---|---|---|"]
+        L += ["| effect | law parameter | explained | refit held-out chi2/n | BIC | outcome |",
+              "|---|---|---|---|---|---|"]
         nh = len(res.heldout_data)
         for c in res.candidates:
             held = f"{c.heldout_chi2 / nh:.2f}" if np.isfinite(c.heldout_chi2) else "-"

@@ -252,7 +252,8 @@ def close_loop(sim: Simulator, data: Dataset, base_bounds: Mapping[str, Sequence
             both = both.with_model_sd(jit)
             fit_data = Dataset(both.observations[:n_fit], fit_data.name)
             heldout_data = Dataset(both.observations[n_fit:], heldout_data.name)
-            say(f"model jitter (base parameters +-0.1%): rms {np.sqrt(np.mean((jit / np.maximum(np.abs(both.values), 1e-300)) ** 2)):.3f} "
+            rel = np.sqrt(np.mean((jit / np.maximum(np.abs(both.values), 1e-300)) ** 2))
+            say(f"model jitter (base parameters +-0.1%): rms {rel:.3f} "
                 "of the measured values, added to the SDs in quadrature")
             # The SDs changed, so the chi-square did: the baseline is refitted with them, as
             # every candidate will be, or a candidate would win by the refit alone.

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import asdict
-from typing import Optional, Tuple
+from typing import Optional
 
 from . import stages
 from ._version import __version__

@@ -100,7 +100,7 @@ def runs_test(signs: Sequence[float]) -> tuple:
 def _group_stats(z: np.ndarray, labels: Sequence[str]) -> Dict[str, tuple]:
     out = {}
     for lab in dict.fromkeys(labels):
-        sel = np.array([l == lab for l in labels])
+        sel = np.array([x == lab for x in labels])
         zz = z[sel]
         out[lab] = (int(sel.sum()), float(zz.mean()), float(np.sqrt(np.mean(zz ** 2))))
     return out

@@ -4,10 +4,9 @@ ParaView opens the particles (radius, velocity, force) at the end of each stage.
 from __future__ import annotations
 
 import json
-import math
 import os
 from dataclasses import dataclass, field
-from typing import Dict, Optional
+from typing import Dict
 
 import numpy as np
 
@@ -171,14 +170,16 @@ def write_xdmf(result: Result, h5_path: str) -> str:
             dims = f"{n} 3" if vec else f"{n}"
             attrs.append(
                 f'        <Attribute Name="{label}" AttributeType="{"Vector" if vec else "Scalar"}" Center="Node">\n'
-                f'          <DataItem Dimensions="{dims}" NumberType="Float" Precision="8" Format="HDF">{base}/{key}</DataItem>\n'
+                f'          <DataItem Dimensions="{dims}" NumberType="Float" Precision="8" Format="HDF">'
+                f'{base}/{key}</DataItem>\n'
                 f'        </Attribute>')
         grids.append(
             f'      <Grid Name="{name}" GridType="Uniform">\n'
             f'        <Time Value="{k}"/>\n'
             f'        <Topology TopologyType="Polyvertex" NumberOfElements="{n}"/>\n'
             f'        <Geometry GeometryType="XYZ">\n'
-            f'          <DataItem Dimensions="{n} 3" NumberType="Float" Precision="8" Format="HDF">{base}/position</DataItem>\n'
+            f'          <DataItem Dimensions="{n} 3" NumberType="Float" Precision="8" Format="HDF">'
+            f'{base}/position</DataItem>\n'
             f'        </Geometry>\n' + "\n".join(attrs) + "\n      </Grid>")
     text = ('<?xml version="1.0" ?>\n<Xdmf Version="3.0">\n  <Domain>\n'
             '    <Grid Name="stages" GridType="Collection" CollectionType="Temporal">\n'

@@ -58,7 +58,7 @@ class RunCache:
             if rec.get("key") != key:
                 raise ValueError("key mismatch")
         except (OSError, ValueError) as e:
-            warnings.warn(f"{path}: unreadable cache record ({e}); it will be recomputed")
+            warnings.warn(f"{path}: unreadable cache record ({e}); it will be recomputed", stacklevel=2)
             return None
         with self._lock:
             self._memory[key] = rec

@@ -55,8 +55,16 @@ from .metrics import DEFAULT_REL_SD_FLOOR
 from .objectives import Targets, as_targets, effective_outputs, mean_outputs, score
 from .optimize import bounded_fd_step, levenberg_step, local_affine_model, nelder_mead_in_box
 from .run_cache import RunCache
-from .runs import (PARAMETERS, SCAN_ONLY_PARAMETERS, RunSetup, RunSpec, check_names, check_positive,
-                   parse_bounds, run_setup)
+from .runs import (
+    PARAMETERS,
+    SCAN_ONLY_PARAMETERS,
+    RunSetup,
+    RunSpec,
+    check_names,
+    check_positive,
+    parse_bounds,
+    run_setup,
+)
 from .worker import run_point
 
 __all__ = ["SCALING_EXPONENTS", "ScanResult", "scan", "FitResult", "fit"]
@@ -365,7 +373,7 @@ class FitResult:
 
 def _history_row(names, point: _Point, targets) -> dict:
     row = {n: point.params[n] for n in names}
-    for i, (t, outs, sc) in enumerate(zip(targets, point.outputs, point.scores)):
+    for i, (_, outs, sc) in enumerate(zip(targets, point.outputs, point.scores)):
         sfx = "" if len(targets) == 1 else f"#{i}"
         for k in ("sigma_f", "dLf_D", "peaked", "sigma_f_max", "dLf_D_max", "bulk_density_relaxed",
                   "bulk_density_max", "coordination_number_relaxed", "coordination_number_relaxed_bulk"):
@@ -489,11 +497,12 @@ def fit(params: Mapping[str, Sequence[float]], targets, *, start: Optional[Mappi
     or RRMSE with criterion 'rrmse'). ``max_runs``: most parameter points to evaluate (each is
     one run per target and seed). ``max_step``: the largest factor a parameter changes by in
     one step; ``min_step`` the smallest worth a run (default 1.02: a 400-particle pellet's
-    sigma_f scatters by a few % between nearby bond laws). ``fixed``: parameters held at a value (SI). ``seeds``: packing seeds averaged per
-    point. ``criterion``: 'z' (rms z of sigma_f, dL_f/D, bulk density), 'rrmse' (eq. 16 on the
-    targets' curves; the scaling steps still use the z residuals, the best point is picked by
-    RRMSE) or 'auto' (rrmse when every diametral target has a curve). ``executor``: 'serial'
-    by default (a fit is sequential; the relaxed pellet stays in this process), or as in
+    sigma_f scatters by a few % between nearby bond laws). ``fixed``: parameters held at a
+    value (SI). ``seeds``: packing seeds averaged per point. ``criterion``: 'z' (rms z of
+    sigma_f, dL_f/D, bulk density), 'rrmse' (eq. 16 on the targets' curves; the scaling
+    steps still use the z residuals, the best point is picked by RRMSE) or 'auto' (rrmse when
+    every diametral target has a curve). ``executor``: 'serial' by default (a fit is
+    sequential; the relaxed pellet stays in this process), or as in
     :func:`scan`, as are ``cache_dir``, ``runner`` and ``relaxed_dir``. ``evaluator``: an
     :class:`pelletdem.execution.Evaluator` to run on instead (its cache and executor, shared
     with other fits; ``cache_dir``, ``executor``, ``max_workers``, ``runner`` and

@@ -83,7 +83,8 @@ def calibrate_variants(variants=None, preset="tiny", *,
                        bond_params: Optional[Mapping[str, Sequence[float]]] = None,
                        start="table5", seeds=(0,), tol: float = 0.5, max_runs: int = 8,
                        compaction_max_runs: int = 6, max_dLD: Optional[float] = None,
-                       break_drop: float = 0.7, bond: Optional[BondLaw] = None, contact: Optional[Mapping[str, float]] = None,
+                       break_drop: float = 0.7, bond: Optional[BondLaw] = None,
+                       contact: Optional[Mapping[str, float]] = None,
                        cache_dir: Optional[Union[str, os.PathLike]] = None,
                        executor=None, max_workers: Optional[int] = None,
                        runner: Callable[[RunSpec], dict] = run_point,
@@ -144,7 +145,8 @@ def calibrate_variants(variants=None, preset="tiny", *,
         if compaction is not None:
             raise ValueError("contact = {...} fixes the contact law; compaction = {...} fits it: pass one")
         if not isinstance(contact, Mapping):
-            raise ValueError(f"contact = {contact!r}: pass a mapping of ContactLaw fields, e.g. {{'k1': 4e4, 'k2': 1.6e5}}")
+            raise ValueError(f"contact = {contact!r}: pass a mapping of ContactLaw fields, "
+                             "e.g. {'k1': 4e4, 'k2': 1.6e5}")
         make_spec({}, preset=p, diametral=False, contact=contact)  # names and values checked
     if not isinstance(start, (str, Mapping)) or (isinstance(start, str) and start != "table5"):
         raise ValueError(f"start = {start!r}: pass 'table5' or a mapping {{label: {{name: value}}}}")
@@ -229,7 +231,8 @@ def calibrate_variants(variants=None, preset="tiny", *,
             "z_dLf_D": sc.get("z_dLf_D", float("nan")), "rms_z": f.rms_z,
             "peaked": bool(outs.get("peaked", 0.0)),
             "bd_sim": bd, "bd_exp": v.bd_pellet, "bd_sd": v.bd_pellet_sd,
-            "z_bd": float((bd - v.bd_pellet) / max(v.bd_pellet_sd, 0.01 * v.bd_pellet)) if math.isfinite(bd) else float("nan"),
+            "z_bd": (float((bd - v.bd_pellet) / max(v.bd_pellet_sd, 0.01 * v.bd_pellet))
+                     if math.isfinite(bd) else float("nan")),
             "cn_sim": cn, "cn_paper": v.cn, "rrmse_paper": v.rrmse,
             "n_points": f.n_points, "converged": f.converged,
         })

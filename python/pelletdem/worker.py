@@ -110,7 +110,7 @@ def _load_relaxed(spec: RunSpec, path: str):
             raise CheckpointError(f"{path}: written for another relax key")
         world = World.from_state(state, threads=1)
     except (OSError, ValueError, KeyError) as e:
-        warnings.warn(f"relaxed pellet {path} not usable ({e}); relaxing again")
+        warnings.warn(f"relaxed pellet {path} not usable ({e}); relaxing again", stacklevel=2)
         return None
     pellet = Pellet(world, spec.preset, {k: int(v) for k, v in extra["walls"].items()}, extra["mould_radius"],
                     extra["mass"], h0=extra["h0"], diameter=extra["diameter"], height=extra["height"])
@@ -126,7 +126,7 @@ def _save_relaxed(spec: RunSpec, path: str, pellet, outs: dict, curve: dict) -> 
     try:
         save_world(pellet.world, path, extra=json.loads(json.dumps(extra, default=jsonable)))
     except OSError as e:  # a full or read-only disk costs a relaxation later, not this run
-        warnings.warn(f"could not save the relaxed pellet to {path}: {e}")
+        warnings.warn(f"could not save the relaxed pellet to {path}: {e}", stacklevel=2)
 
 
 def _relaxed(spec: RunSpec, relaxed_dir=None):
@@ -216,7 +216,8 @@ def run_point(spec: RunSpec, relaxed_dir: Optional[Union[str, os.PathLike]] = No
     (compaction: bulk densities kg/m^3, coordination numbers, dlnbd_dlnsigma; diametral:
     ``sigma_f`` Pa and ``dLf_D`` at the failure (:func:`failure_point`), ``peaked`` 1.0 when
     the failure came before the test ended (0.0: the values are lower bounds),
-    ``sigma_f_max`` / ``dLf_D_max`` the curve's global maximum, bond counts), ``curve`` ({dL_D, sigma_1 (Pa)}), ``compaction_curve``,
+    ``sigma_f_max`` / ``dLf_D_max`` the curve's global maximum, bond counts), ``curve``
+    ({dL_D, sigma_1 (Pa)}), ``compaction_curve``,
     ``relaxed_reused`` (False when this run relaxed the pellet), ``relaxed_from`` ('memory',
     'disk' or ''), ``wall_time_s`` (s), ``worker``.
     """

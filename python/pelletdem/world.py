@@ -161,10 +161,11 @@ class World:
     def sort_particles(self) -> np.ndarray:
         """Renumber the particles so that neighbours in space are neighbours in memory (Morton
         order of the neighbour cells); the pair loop then runs from cache: on a settled bed of
-        40,000, ~15 % faster on one thread and ~2x on two. Velocities, forces, contact and wall histories move with the particles and
-        the time series are kept. Allowed only before bonds are created and while no numpy view
-        of the particle arrays (``np.asarray(world.x)``) is alive. Returns ``order`` (N,): new
-        particle k was particle ``order[k]``."""
+        40,000, ~15 % faster on one thread and ~2x on two. Velocities, forces, contact and wall
+        histories move with the particles and the time series are kept. Allowed only before
+        bonds are created and while no numpy view of the particle arrays
+        (``np.asarray(world.x)``) is alive. Returns ``order`` (N,): new particle k was particle
+        ``order[k]``."""
         return self._core.sort_particles()
 
     # --- time series: the engine's samples, after any restored from a saved state -------------

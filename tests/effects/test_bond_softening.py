@@ -3,7 +3,6 @@ strain u_c, then its force falls linearly (slope -k_n A / s) and it breaks near 
 off, the bond is the paper's brittle one; its damage survives a checkpoint."""
 from __future__ import annotations
 
-
 import numpy as np
 import pytest
 

@@ -2,7 +2,6 @@
 from the contact's residual overlap at bonding."""
 from __future__ import annotations
 
-
 import numpy as np
 import pytest
 

@@ -8,10 +8,10 @@ import math
 
 import numpy as np
 import pytest
+from test_unloading_growth import _collide
 
 import pelletdem as pd
 from test_contact_law import R, frictionless
-from test_unloading_growth import _collide
 
 
 def _residual(k1, k2, ratio, phi, d_max):

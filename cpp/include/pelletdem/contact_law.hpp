@@ -15,33 +15,40 @@ namespace pelletdem {
 
 // Per-contact history, kept in the contact table and carried across neighbour-list rebuilds.
 struct ContactHistory {
-  double delta0 = 0.0;        // residual (plastic) overlap delta_{n,0} of eq. 5, m
-  Vec3 ft = Vec3::Zero();     // stored tangential spring force on the second body, N (eq. 9)
+  double delta0 = 0.0;     // residual (plastic) overlap delta_{n,0} of eq. 5, m
+  Vec3 ft = Vec3::Zero();  // stored tangential spring force on the second body, N (eq. 9)
   bool blank() const { return delta0 == 0.0 && ft.squaredNorm() == 0.0; }
 };
 
 // The paper's contact law, one row per parameter (params.hpp); the candidate effects' rows
 // (effects/*.hpp) follow them in ContactLawParams.
-#define PELLETDEM_CONTACT_ROWS(X)                                                                  \
-  X(double, k1, 1.0e5, Positive, 0.0, kHuge, "N/m", "k1", true,                                    \
-    "loading (plastic) stiffness, eq. 5: Table 4 (from p_y = 100 MPa by eq. 7 with r = 0.2 mm)")                 \
-  X(double, k2, 4.0e5, Positive, 0.0, kHuge, "N/m", "k2", true,                                    \
-    "unloading and reloading (elastic) stiffness, eq. 5: Table 4 (e = sqrt(k1/k2) = 0.5, eq. 8)")                   \
-  X(double, kc, 600.0, NonNegative, 0.0, kHuge, "N/m", "kc", true, "adhesion stiffness, eq. 5: Table 4 (ramped to 0 at bonding)")    \
-  X(double, kt_ratio, 1.0, Range, 0.0, 10.0, "-", "kt_ratio", true,                                \
-    "tangential stiffness k_t over k1: the paper (section 3.1.1, k_t equal to the normal stiffness)")                 \
-  X(double, mu, 0.5, Range, 0.0, 10.0, "-", "mu", true, "particle-particle friction coefficient mu_pp, eq. 9: Table 4") \
-  X(double, mu_wall, 0.15, Range, 0.0, 10.0, "-", "mu_wall", true, "particle-wall friction coefficient mu_pw: Table 4") \
-  X(double, rolling, 0.01, Range, 0.0, 1.0, "-", "rolling", true, "rolling friction coefficient m_r, eq. 11: Table 4") \
-  X(bool, wall_adhesion, false, None, 0.0, 1.0, "-", "wall_adhesion", true,                        \
-    "walls adhere too; ours: off, a withdrawing steel mould must not drag the pellet's skin along")     \
-  X(double, wall_stiffness_factor, 2.0, Range, 0.01, 100.0, "-", "wall_stiffness_factor", true,    \
-    "wall contact stiffness over a pair's; ours: eq. 7 with r* = r at a flat wall, r/2 between equal spheres")  \
-  X(double, normal_damping_ratio, 0.0, Range, 0.0, 1.0, "-", "normal_damping_ratio", false,        \
-    "viscous normal damping, fraction of critical on k2: the paper has none (dissipation is hysteretic)")                     \
-  X(bool, scale_with_radius, false, None, 0.0, 1.0, "-", "scale_with_radius", false,               \
-    "k1, k2, kc of a pair scaled by 2 r*/r_ref (eq. 7: stiffness proportional to size); ours: off, Table 4 gives one mean")           \
-  X(double, r_ref, 2.0e-4, Positive, 0.0, kHuge, "m", "r_ref", true, "reference radius of that scaling: Table 4's mean radius")
+#define PELLETDEM_CONTACT_ROWS(X)                                                                            \
+  X(double, k1, 1.0e5, Positive, 0.0, kHuge, "N/m", "k1", true,                                              \
+    "loading (plastic) stiffness, eq. 5: Table 4 (from p_y = 100 MPa by eq. 7 with r = 0.2 mm)")             \
+  X(double, k2, 4.0e5, Positive, 0.0, kHuge, "N/m", "k2", true,                                              \
+    "unloading and reloading (elastic) stiffness, eq. 5: Table 4 (e = sqrt(k1/k2) = 0.5, eq. 8)")            \
+  X(double, kc, 600.0, NonNegative, 0.0, kHuge, "N/m", "kc", true,                                           \
+    "adhesion stiffness, eq. 5: Table 4 (ramped to 0 at bonding)")                                           \
+  X(double, kt_ratio, 1.0, Range, 0.0, 10.0, "-", "kt_ratio", true,                                          \
+    "tangential stiffness k_t over k1: the paper (section 3.1.1, k_t equal to the normal stiffness)")        \
+  X(double, mu, 0.5, Range, 0.0, 10.0, "-", "mu", true,                                                      \
+    "particle-particle friction coefficient mu_pp, eq. 9: Table 4")                                          \
+  X(double, mu_wall, 0.15, Range, 0.0, 10.0, "-", "mu_wall", true,                                           \
+    "particle-wall friction coefficient mu_pw: Table 4")                                                     \
+  X(double, rolling, 0.01, Range, 0.0, 1.0, "-", "rolling", true,                                            \
+    "rolling friction coefficient m_r, eq. 11: Table 4")                                                     \
+  X(bool, wall_adhesion, false, None, 0.0, 1.0, "-", "wall_adhesion", true,                                  \
+    "walls adhere too; ours: off, a withdrawing steel mould must not drag the pellet's skin along")          \
+  X(double, wall_stiffness_factor, 2.0, Range, 0.01, 100.0, "-", "wall_stiffness_factor", true,              \
+    "wall contact stiffness over a pair's; ours: eq. 7 with r* = r at a flat wall, r/2 between equal "       \
+    "spheres")                                                                                               \
+  X(double, normal_damping_ratio, 0.0, Range, 0.0, 1.0, "-", "normal_damping_ratio", false,                  \
+    "viscous normal damping, fraction of critical on k2: the paper has none (dissipation is hysteretic)")    \
+  X(bool, scale_with_radius, false, None, 0.0, 1.0, "-", "scale_with_radius", false,                         \
+    "k1, k2, kc of a pair scaled by 2 r*/r_ref (eq. 7: stiffness proportional to size); ours: off, Table 4 " \
+    "gives one mean")                                                                                        \
+  X(double, r_ref, 2.0e-4, Positive, 0.0, kHuge, "m", "r_ref", true,                                         \
+    "reference radius of that scaling: Table 4's mean radius")
 
 #define PELLETDEM_CONTACT_ALL_ROWS(X) PELLETDEM_CONTACT_ROWS(X) PELLETDEM_CONTACT_EFFECT_ROWS(X)
 
@@ -66,19 +73,19 @@ struct ContactLawParams {
 
 // Geometry and kinematics of one contact as the law sees it.
 struct ContactKinematics {
-  double delta;      // normal overlap, m (> 0 in contact)
-  double vn;         // relative normal velocity, m/s (> 0 separating)
-  Vec3 vt;           // relative tangential velocity of the second body, m/s
-  Vec3 n;            // unit normal from the first body to the second
-  double r_eff;      // equivalent radius r*, m
-  double m_eff;      // equivalent mass m*, kg
-  bool wall = false; // the first body is a wall
+  double delta;             // normal overlap, m (> 0 in contact)
+  double vn;                // relative normal velocity, m/s (> 0 separating)
+  Vec3 vt;                  // relative tangential velocity of the second body, m/s
+  Vec3 n;                   // unit normal from the first body to the second
+  double r_eff;             // equivalent radius r*, m
+  double m_eff;             // equivalent mass m*, kg
+  bool wall = false;        // the first body is a wall
   double load_cap = kHuge;  // largest loading-branch force (crushing), N
 };
 
 struct ContactForce {
-  double fn;         // normal force on the second body along n, N (> 0 repulsive)
-  Vec3 ft;           // tangential force on the second body, N
+  double fn;  // normal force on the second body along n, N (> 0 repulsive)
+  Vec3 ft;    // tangential force on the second body, N
 };
 
 // Linear hysteretic spring with linear adhesion (eq. 5-8), incremental Coulomb friction with a
@@ -129,7 +136,7 @@ class HystereticLaw {
   // Normal force of eq. 5; updates the residual overlap delta0 so the unloading line moves
   // with the history (Walton-Braun with Luding's adhesive branch).
   PELLETDEM_INLINE double normal_force(double delta, double& delta0, double r_eff, double adhesion_scale,
-                      bool wall = false, double load_cap = kHuge) const {
+                                       bool wall = false, double load_cap = kHuge) const {
     const double s = stiffness_scale(r_eff, wall);
     const double k1 = s * p_.k1, k2 = s * p_.k2, kc = s * p_.kc * adhesion_scale;
     const double k2e = unloading_stiffness(k2, delta0, r_eff);
@@ -148,7 +155,7 @@ class HystereticLaw {
   }
 
   PELLETDEM_INLINE ContactForce evaluate(const ContactKinematics& c, ContactHistory& h, double dt, double mu,
-                        double adhesion_scale) const {
+                                         double adhesion_scale) const {
     const double s = stiffness_scale(c.r_eff, c.wall);
     double fn = normal_force(c.delta, h.delta0, c.r_eff, adhesion_scale, c.wall, c.load_cap);
     if (p_.normal_damping_ratio > 0.0)
@@ -161,7 +168,7 @@ class HystereticLaw {
     h.ft -= h.ft.dot(c.n) * c.n;
     const double new2 = h.ft.squaredNorm();
     if (new2 > 0.0) h.ft *= std::sqrt(old2 / new2);
-    h.ft -= kt * dt * c.vt;  // eq. 9, incremental spring
+    h.ft -= kt * dt * c.vt;                                            // eq. 9, incremental spring
     const double gamma_t = damping_factor_ * std::sqrt(c.m_eff * kt);  // eq. 10
     Vec3 ft = h.ft - gamma_t * c.vt;
     const double limit = mu * std::max(fn, 0.0);
@@ -174,8 +181,7 @@ class HystereticLaw {
   }
 
   // Elastic energy held by a contact, J: what it would give back if unloaded to zero force.
-  double stored_energy(double delta, const ContactHistory& h, double r_eff,
-                       bool wall = false) const {
+  double stored_energy(double delta, const ContactHistory& h, double r_eff, bool wall = false) const {
     const double s = stiffness_scale(r_eff, wall);
     const double k2 = unloading_stiffness(s * p_.k2, h.delta0, r_eff);
     const double f = k2 * (delta - h.delta0);

@@ -23,23 +23,33 @@ namespace pelletdem {
 struct ContactEffect {
   // Loading-branch force of eq. 5 at overlap delta (m), given f = k1 delta (N); r_eff: r* (m).
   template <class P>
-  static double loading_force(const P&, double f, double /*delta*/, double /*r_eff*/) { return f; }
+  static double loading_force(const P&, double f, double /*delta*/, double /*r_eff*/) {
+    return f;
+  }
   // True when the effect makes the unloading stiffness depend on the contact's history (one
   // such effect at a time: its `residual` must solve for its own stiffness).
   template <class P>
-  static bool shapes_unloading(const P&) { return false; }
+  static bool shapes_unloading(const P&) {
+    return false;
+  }
   // Unloading stiffness (N/m) at residual overlap delta0 (m), given the law's k2.
   template <class P>
-  static double unloading_stiffness(const P&, double k2, double /*delta0*/, double /*r_eff*/) { return k2; }
+  static double unloading_stiffness(const P&, double k2, double /*delta0*/, double /*r_eff*/) {
+    return k2;
+  }
   // The residual overlap (m) that puts force f on the unloading line through delta; `plain`
   // is the answer for a constant k2, delta - f / k2.
   template <class P>
   static double residual(const P&, double plain, double /*delta*/, double /*f*/, double /*k2*/,
-                         double /*r_eff*/) { return plain; }
+                         double /*r_eff*/) {
+    return plain;
+  }
   // Largest loading force (N) of a wall contact of a particle of radius r (m), given the cap
   // so far; `crushable`: the wall is one of the diametral plates (Wall::crushable).
   template <class P>
-  static double wall_load_cap(const P&, double cap, double /*r*/, bool /*crushable*/) { return cap; }
+  static double wall_load_cap(const P&, double cap, double /*r*/, bool /*crushable*/) {
+    return cap;
+  }
 };
 
 // The bond law's hook points: when a bond is made (World::create_bonds) and when it is
@@ -47,20 +57,28 @@ struct ContactEffect {
 struct BondEffect {
   // The bond's radius (m) given r_b, the pair's residual overlap delta0 (m) and r* (m).
   template <class P>
-  static double radius(const P&, double r_b, double /*delta0*/, double /*r_eff*/) { return r_b; }
+  static double radius(const P&, double r_b, double /*delta0*/, double /*r_eff*/) {
+    return r_b;
+  }
   // Factor on E_b (and so on k_n, k_t) of every bond.
   template <class P>
-  static double stiffness_factor(const P&) { return 1.0; }
+  static double stiffness_factor(const P&) {
+    return 1.0;
+  }
   // Factor on sigma_c and tau_c of the bond between particles i and j.
   template <class P>
-  static double strength_factor(const P&, Index /*i*/, Index /*j*/) { return 1.0; }
+  static double strength_factor(const P&, Index /*i*/, Index /*j*/) {
+    return 1.0;
+  }
   // Anything else the effect keeps in the bond record (a Bond), set when it is made.
   template <class P, class B>
   static void init(const P&, B&) {}
   // A bond (a Bond) loaded to q > 1 times the capacity it has left (`left`, a fraction of its
   // strength): the capacity left after this step, given `after` (0: it breaks, eq. 14).
   template <class B>
-  static double capacity_after_overload(const B&, double after, double /*left*/, double /*q*/) { return after; }
+  static double capacity_after_overload(const B&, double after, double /*left*/, double /*q*/) {
+    return after;
+  }
 };
 
 // The effects of one law, each hook called on them in turn (in the order of their headers'
@@ -125,5 +143,7 @@ struct EffectList {
 
 // An effect's registration line, at the end of its header: the build lists the header's type
 // under its law (CMakeLists.txt reads these lines).
-#define PELLETDEM_CONTACT_EFFECT(Type) static_assert(std::is_base_of_v<::pelletdem::ContactEffect, ::pelletdem::Type>);
-#define PELLETDEM_BOND_EFFECT(Type) static_assert(std::is_base_of_v<::pelletdem::BondEffect, ::pelletdem::Type>);
+#define PELLETDEM_CONTACT_EFFECT(Type) \
+  static_assert(std::is_base_of_v<::pelletdem::ContactEffect, ::pelletdem::Type>);
+#define PELLETDEM_BOND_EFFECT(Type) \
+  static_assert(std::is_base_of_v<::pelletdem::BondEffect, ::pelletdem::Type>);

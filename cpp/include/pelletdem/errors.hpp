@@ -43,11 +43,10 @@ inline void require(bool ok, const std::string& message) {
 }
 
 // Finite and inside [lo, hi]; the message names the parameter and the range.
-inline void require_range(const char* name, double value, double lo, double hi,
-                          const char* unit = "") {
+inline void require_range(const char* name, double value, double lo, double hi, const char* unit = "") {
   if (!(value >= lo && value <= hi))  // also catches NaN
-    throw ParameterError(cat(name, " = ", value, " ", unit, " is out of range: allowed ", lo,
-                             " <= ", name, " <= ", hi, " ", unit));
+    throw ParameterError(cat(name, " = ", value, " ", unit, " is out of range: allowed ", lo, " <= ", name,
+                             " <= ", hi, " ", unit));
 }
 
 inline void require_positive(const char* name, double value, const char* unit = "") {

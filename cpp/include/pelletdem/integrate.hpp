@@ -26,10 +26,10 @@ struct DriftResult {
 struct LoadSums {
   const std::vector<Load>* bufs;  // buffers of threads 0 .. nt-1, added in that order
   int nt;
-  Vec3 g;                         // gravity (divided by the density scale), m/s^2
-  const Motion* mo;               // v and w of the force pass (pack_particles)
-  const double* spin_inv;         // 1 / |w| of the force pass, 1/(rad/s)
-  const long* range;              // buffer k > 0 holds particles [range[2k], range[2k+1])
+  Vec3 g;                  // gravity (divided by the density scale), m/s^2
+  const Motion* mo;        // v and w of the force pass (pack_particles)
+  const double* spin_inv;  // 1 / |w| of the force pass, 1/(rad/s)
+  const long* range;       // buffer k > 0 holds particles [range[2k], range[2k+1])
 };
 
 // Force f and torque t on particle i from the buffers: the threads' sums, eq. 11's rolling
@@ -60,8 +60,8 @@ void reduce_loads(long lo, long hi, const LoadSums& s, double half_dt, Particles
 // For particles [lo, hi): zero A0, and write xr (position, radius), mo (velocity, mass, spin,
 // and the rolling-friction cap |w| I / dt of eq. 11) and spin_inv (1 / |w|, 0 at rest); cap
 // and spin_inv are zero when `rolling` is false.
-void pack_particles(long lo, long hi, const Particles& p, double inv_dt, bool rolling, Load* A0,
-                    PosRad* xr, Motion* mo, double* spin_inv);
+void pack_particles(long lo, long hi, const Particles& p, double inv_dt, bool rolling, Load* A0, PosRad* xr,
+                    Motion* mo, double* spin_inv);
 
 // For particles [lo, hi): v += dt/2 f/m, w += dt/2 t/I, x += dt v, then pack_particles.
 // Reports the largest displacement from x_build and any non-finite position. With `pending`
@@ -69,8 +69,7 @@ void pack_particles(long lo, long hi, const Particles& p, double inv_dt, bool ro
 // comes first, in the same pass: the same bits as the two passes one after the other. p.f and
 // p.t, and p.v and p.w, are then left as they were: the velocities live in mo (Motion) until
 // finish_pending_kick or the next reduction writes them.
-DriftResult kick_drift_pack(long lo, long hi, double dt, bool rolling, Particles& p,
-                            const Vec3* x_build, Load* A0, PosRad* xr, Motion* mo,
-                            double* spin_inv, const LoadSums* pending);
+DriftResult kick_drift_pack(long lo, long hi, double dt, bool rolling, Particles& p, const Vec3* x_build,
+                            Load* A0, PosRad* xr, Motion* mo, double* spin_inv, const LoadSums* pending);
 
 }  // namespace pelletdem

@@ -15,17 +15,17 @@ struct Box {
   Vec3 lo = Vec3::Zero();
   Vec3 hi = Vec3::Zero();
   bool contains(const Vec3& p) const {
-    return p.x() >= lo.x() && p.y() >= lo.y() && p.z() >= lo.z() && p.x() <= hi.x() &&
-           p.y() <= hi.y() && p.z() <= hi.z();
+    return p.x() >= lo.x() && p.y() >= lo.y() && p.z() >= lo.z() && p.x() <= hi.x() && p.y() <= hi.y() &&
+           p.z() <= hi.z();
   }
 };
 
 class NeighborList {
  public:
-  std::vector<Index> start;              // start[i]..start[i+1]: pairs of particle i
-  std::vector<Index> j;                  // second particle of each pair (j > i)
-  std::vector<Index> first;              // first particle i of each pair, for flat pair loops
-  std::vector<ContactHistory> history;   // per pair, survives rebuilds
+  std::vector<Index> start;             // start[i]..start[i+1]: pairs of particle i
+  std::vector<Index> j;                 // second particle of each pair (j > i)
+  std::vector<Index> first;             // first particle i of each pair, for flat pair loops
+  std::vector<ContactHistory> history;  // per pair, survives rebuilds
   // Per pair, bit kLiveTouch: the history may be non-zero (the pair touched at the last force
   // pass). The pair loop clears the history of pairs that came apart; with this flag it reads
   // one byte of a pair that does not touch instead of its 32-byte history, without a branch.
@@ -51,8 +51,7 @@ class NeighborList {
 
   // Rebuild for cutoff r_i + r_j + skin. Throws ParticleEscapedError for a particle outside
   // the box. History of pairs still present is kept; pairs that left the list had no contact.
-  void build(const Particles& p, const Box& box, double skin, double r_max, long step,
-             int threads);
+  void build(const Particles& p, const Box& box, double skin, double r_max, long step, int threads);
 
   // Brute-force reference, O(N^2): every pair (i < j) closer than r_i + r_j + skin.
   static std::vector<std::pair<Index, Index>> brute_force(const Particles& p, double skin);

@@ -19,12 +19,12 @@
 namespace pelletdem {
 
 enum class Check {
-  None,           // a flag, or anything finite in [lo, hi]
-  Range,          // lo <= value <= hi
-  Positive,       // finite and > 0 (and in [lo, hi])
-  NonNegative,    // finite and >= 0 (and in [lo, hi])
-  ZeroOrRange,    // 0 (off), or lo <= value <= hi
-  WholeRange,     // a whole number with lo <= value <= hi
+  None,         // a flag, or anything finite in [lo, hi]
+  Range,        // lo <= value <= hi
+  Positive,     // finite and > 0 (and in [lo, hi])
+  NonNegative,  // finite and >= 0 (and in [lo, hi])
+  ZeroOrRange,  // 0 (off), or lo <= value <= hi
+  WholeRange,   // a whole number with lo <= value <= hi
 };
 
 // One row of a table, as the bindings and the docs read it.
@@ -75,6 +75,6 @@ inline void check_param(Check check, const char* label, double value, double lo,
   check_param(Check::check, label, static_cast<double>(name), lo, hi, unit);
 // True while every row that the four-lane kernel lacks keeps its default.
 #define PELLETDEM_PARAM_LANES(type, name, def, check, lo, hi, unit, label, lanes, doc) \
-  && (lanes || name == static_cast<type>(def))
+  &&(lanes || name == static_cast<type>(def))
 
 }  // namespace pelletdem

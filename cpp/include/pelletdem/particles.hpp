@@ -17,9 +17,9 @@ static_assert(sizeof(PosRad) == 32, "PosRad is four packed doubles");
 
 // What the contact kernels read of a particle besides (x, r), packed as two runs of four
 // doubles in one cache line: velocity and mass, angular velocity and the cap |w| I / dt on the
-// body's summed rolling-friction moment (eq. 11, see sum_loads). compute_forces (or step's drift pass) writes it from the particle
-// arrays before the pairs. Inside run() it is the working copy of v and w: the drift pass
-// updates them here in place and Particles::v and w are written when the run pauses
+// body's summed rolling-friction moment (eq. 11, see sum_loads). compute_forces (or step's drift pass) writes
+// it from the particle arrays before the pairs. Inside run() it is the working copy of v and w: the drift
+// pass updates them here in place and Particles::v and w are written when the run pauses
 // (World::finish_pending_kick), which spares the pass two streams over the particles.
 struct alignas(64) Motion {
   double vx, vy, vz, m;
@@ -52,7 +52,7 @@ struct alignas(64) Load {
   Vec3 f = Vec3::Zero();
   double unused_f = 0.0;  // stays 0: the kernels add 0 to it
   Vec3 t = Vec3::Zero();
-  double roll = 0.0;      // sum of m_r f_n r over the contacts (eq. 11), N m
+  double roll = 0.0;  // sum of m_r f_n r over the contacts (eq. 11), N m
 };
 static_assert(sizeof(Load) == 64, "Load is two runs of four doubles");
 
@@ -60,13 +60,13 @@ static_assert(sizeof(Load) == 64, "Load is two runs of four doubles");
 inline double sphere_inertia(double m, double r) { return 0.4 * m * r * r; }
 
 struct Particles {
-  std::vector<Vec3> x;      // position, m
-  std::vector<Vec3> v;      // velocity, m/s
-  std::vector<Vec3> w;      // angular velocity, rad/s
-  std::vector<Vec3> f;      // force, N
-  std::vector<Vec3> t;      // torque, N m
-  std::vector<double> r;    // radius, m
-  std::vector<double> m;    // mass (density-scaled), kg
+  std::vector<Vec3> x;    // position, m
+  std::vector<Vec3> v;    // velocity, m/s
+  std::vector<Vec3> w;    // angular velocity, rad/s
+  std::vector<Vec3> f;    // force, N
+  std::vector<Vec3> t;    // torque, N m
+  std::vector<double> r;  // radius, m
+  std::vector<double> m;  // mass (density-scaled), kg
   std::vector<double> inv_m;
   std::vector<double> inv_i;  // 1 / moment of inertia (solid sphere, 2/5 m r^2), 1/(kg m^2)
 

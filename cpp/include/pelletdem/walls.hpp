@@ -20,9 +20,9 @@ struct WallContact {
 struct Wall {
   std::string name;
   WallKind kind = WallKind::Plane;
-  Vec3 point = Vec3::Zero();   // plane: a point on it; cylinder: a point on the axis, m
-  Vec3 normal = Vec3::UnitZ(); // plane: unit normal pointing into the particles' side
-  double radius = 0.0;         // cylinder radius, m
+  Vec3 point = Vec3::Zero();     // plane: a point on it; cylinder: a point on the axis, m
+  Vec3 normal = Vec3::UnitZ();   // plane: unit normal pointing into the particles' side
+  double radius = 0.0;           // cylinder radius, m
   Vec3 velocity = Vec3::Zero();  // prescribed translation velocity, m/s
   double radius_rate = 0.0;      // cylinder: dR/dt, m/s
   bool active = true;
@@ -35,14 +35,14 @@ struct Wall {
   double servo_max_speed = 0.0;  // m/s
 
   // Results of the last force evaluation.
-  Vec3 force = Vec3::Zero();   // total force the particles exert on the wall, N
-  Vec3 torque = Vec3::Zero();  // about `point`, N m
+  Vec3 force = Vec3::Zero();       // total force the particles exert on the wall, N
+  Vec3 torque = Vec3::Zero();      // about `point`, N m
   double max_overlap_ratio = 0.0;  // largest delta / r among its contacts this step
   Index max_overlap_particle = 0;
 
   // Motion since the last neighbour rebuild, for the rebuild criterion.
   double moved_since_build = 0.0;
-  double travel = 0.0;  // displacement along the normal since creation, m (> 0 into the particles)
+  double travel = 0.0;     // displacement along the normal since creation, m (> 0 into the particles)
   bool load_wall = false;  // counts in the world's load marker
   // Contacts with this wall obey the contact law's plate_yield_stress (the diametral plates).
   bool crushable = false;

@@ -17,29 +17,29 @@
 namespace pelletdem {
 
 struct WorldParams {
-  double dt = 2.0e-6;                 // time step, s
-  Vec3 gravity = Vec3(0, 0, -9.81);   // physical gravity, m/s^2 (divided by density_scale)
-  double density = 680.0;             // particle solid density, kg/m^3 (Table 4)
-  double density_scale = 1.0e4;       // mass factor; gravity is divided by it (section 3.1.2)
-  double skin = 2.0e-5;               // Verlet skin, m
-  Box box;                            // the domain; leaving it is an error
+  double dt = 2.0e-6;                // time step, s
+  Vec3 gravity = Vec3(0, 0, -9.81);  // physical gravity, m/s^2 (divided by density_scale)
+  double density = 680.0;            // particle solid density, kg/m^3 (Table 4)
+  double density_scale = 1.0e4;      // mass factor; gravity is divided by it (section 3.1.2)
+  double skin = 2.0e-5;              // Verlet skin, m
+  Box box;                           // the domain; leaving it is an error
   int threads = 1;
-  double max_overlap_ratio = 0.9;     // guard: delta / r beyond this stops the run
-  long sample_interval = 100;         // steps between samples of the time series
+  double max_overlap_ratio = 0.9;  // guard: delta / r beyond this stops the run
+  long sample_interval = 100;      // steps between samples of the time series
   ContactLawParams contact;
   void validate() const;
 };
 
 enum class StopKind {
-  Time,                  // time >= value, s
-  Steps,                 // steps run in this call >= value
-  KineticEnergyBelow,    // kinetic energy < value, J (scaled mass)
+  Time,                        // time >= value, s
+  Steps,                       // steps run in this call >= value
+  KineticEnergyBelow,          // kinetic energy < value, J (scaled mass)
   InternalKineticEnergyBelow,  // kinetic energy about the centre of mass < value, J
-  WallForceAbove,        // wall's compressive normal force >= value, N
-  WallForceBelow,        // wall's compressive normal force <= value, N
-  WallTravelAbove,       // wall's travel along its normal >= value, m
-  LoadMarkerAbove,       // load marker (sum of travels of load walls) >= value, m
-  LoadDropBelow,         // smoothed load force <= value * its peak (track_load_peak), 0 < value < 1
+  WallForceAbove,              // wall's compressive normal force >= value, N
+  WallForceBelow,              // wall's compressive normal force <= value, N
+  WallTravelAbove,             // wall's travel along its normal >= value, m
+  LoadMarkerAbove,             // load marker (sum of travels of load walls) >= value, m
+  LoadDropBelow,               // smoothed load force <= value * its peak (track_load_peak), 0 < value < 1
 };
 
 struct StopCondition {
@@ -171,7 +171,10 @@ class World {
     return w;
   }
   // Positions/velocities set from outside invalidate the contact list and the forces.
-  void invalidate() { list_valid_ = false; forces_valid_ = false; }
+  void invalidate() {
+    list_valid_ = false;
+    forces_valid_ = false;
+  }
 
   // Save and restore the whole state. load_state needs a world built with the same
   // WorldParams; after it the next step is exactly the step the saved world would have taken.
@@ -185,7 +188,10 @@ class World {
   std::vector<Index> sort_particles();
 
   // --- restart support --------------------------------------------------------------------------
-  void set_time(double t, long step) { time_ = t; step_ = step; }
+  void set_time(double t, long step) {
+    time_ = t;
+    step_ = step;
+  }
   void set_broken_bonds(std::vector<BrokenBond> b) { broken_ = std::move(b); }
 
  private:
@@ -286,13 +292,12 @@ class World {
 };
 
 // Radii from a normal distribution truncated to [r_min, r_max] (rejection sampling), seeded.
-std::vector<double> truncated_normal_radii(long n, double mean, double sd, double r_min,
-                                           double r_max, std::uint64_t seed);
+std::vector<double> truncated_normal_radii(long n, double mean, double sd, double r_min, double r_max,
+                                           std::uint64_t seed);
 
 // Random sequential addition of non-overlapping spheres inside a z-aligned cylinder between
 // z_lo and z_hi. Throws ParameterError when they do not fit. Output sorted along z for locality.
-std::vector<Vec3> random_pack_cylinder(std::vector<double>& radii, double cx, double cy,
-                                       double radius, double z_lo, double z_hi,
-                                       std::uint64_t seed, long max_attempts);
+std::vector<Vec3> random_pack_cylinder(std::vector<double>& radii, double cx, double cy, double radius,
+                                       double z_lo, double z_hi, std::uint64_t seed, long max_attempts);
 
 }  // namespace pelletdem

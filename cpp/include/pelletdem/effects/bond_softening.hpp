@@ -5,15 +5,17 @@
 // declines slowly after it.
 #include "pelletdem/effect.hpp"
 
-#define PELLETDEM_ROWS_BondSoftening(X)                                               \
-  X(double, softening, 0.0, Range, 0.0, 100.0, "-", "bond softening", true,           \
+#define PELLETDEM_ROWS_BondSoftening(X)                                     \
+  X(double, softening, 0.0, Range, 0.0, 100.0, "-", "bond softening", true, \
     "bond softening s: capacity falls to zero at (1 + s) times the peak strain; 0 brittle")
 
 namespace pelletdem {
 
 struct BondSoftening : BondEffect {
   template <class P, class B>
-  static void init(const P& p, B& b) { b.softening = p.softening; }
+  static void init(const P& p, B& b) {
+    b.softening = p.softening;
+  }
   // The stress is returned to the shrinking capacity: this step's stretch beyond the capacity,
   // (q - 1) left sigma_c / E_b, lowers it by (q - 1) left sigma_c / s.
   template <class B>

@@ -6,10 +6,10 @@
 
 #include "pelletdem/effect.hpp"
 
-#define PELLETDEM_ROWS_Hardening(X)                                                        \
-  X(double, hardening, 0.0, Range, 0.0, 1.0e4, "-", "hardening", false,                    \
+#define PELLETDEM_ROWS_Hardening(X)                                                           \
+  X(double, hardening, 0.0, Range, 0.0, 1.0e4, "-", "hardening", false,                       \
     "contact hardening h: loading force k1 delta (1 + h (delta/r*)^n); 0 is the paper's law") \
-  X(double, hardening_exponent, 1.0, Range, 0.5, 4.0, "-", "hardening_exponent", true,     \
+  X(double, hardening_exponent, 1.0, Range, 0.5, 4.0, "-", "hardening_exponent", true,        \
     "exponent n of the contact hardening")
 
 namespace pelletdem {

@@ -6,7 +6,7 @@
 
 #include "pelletdem/effect.hpp"
 
-#define PELLETDEM_ROWS_OverlapBondRadius(X)                                                    \
+#define PELLETDEM_ROWS_OverlapBondRadius(X)                                                     \
   X(double, overlap_radius_gain, 0.0, Range, 0.0, 1.0e3, "-", "bond overlap_radius_gain", true, \
     "bond radius r_b (1 + g delta0/r*) from the contact's residual overlap at bonding; 0 off")
 

@@ -8,15 +8,17 @@
 
 #include "pelletdem/effect.hpp"
 
-#define PELLETDEM_ROWS_UnloadingGrowth(X)                                                  \
-  X(double, unloading_growth, 0.0, Range, 0.0, 1.0e4, "-", "unloading_growth", false,      \
+#define PELLETDEM_ROWS_UnloadingGrowth(X)                                             \
+  X(double, unloading_growth, 0.0, Range, 0.0, 1.0e4, "-", "unloading_growth", false, \
     "growth g of the unloading stiffness with plastic flattening, k2 (1 + g delta0/r*); 0 off")
 
 namespace pelletdem {
 
 struct UnloadingGrowth : ContactEffect {
   template <class P>
-  static bool shapes_unloading(const P& p) { return p.unloading_growth > 0.0; }
+  static bool shapes_unloading(const P& p) {
+    return p.unloading_growth > 0.0;
+  }
   template <class P>
   static double unloading_stiffness(const P& p, double k2, double delta0, double r_eff) {
     return k2 * (1.0 + p.unloading_growth * std::max(delta0, 0.0) / r_eff);

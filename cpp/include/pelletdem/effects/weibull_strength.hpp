@@ -8,10 +8,10 @@
 
 #include "pelletdem/effect.hpp"
 
-#define PELLETDEM_ROWS_WeibullStrength(X)                                                        \
-  X(double, weibull_modulus, 0.0, ZeroOrRange, 0.5, 100.0, "-", "bond weibull_modulus", true,    \
-    "Weibull modulus m of the bonds' strengths (mean kept); 0: every bond as strong")            \
-  X(double, strength_seed, 0.0, WholeRange, 0.0, 9.0e15, "-", "bond strength_seed", true,        \
+#define PELLETDEM_ROWS_WeibullStrength(X)                                                     \
+  X(double, weibull_modulus, 0.0, ZeroOrRange, 0.5, 100.0, "-", "bond weibull_modulus", true, \
+    "Weibull modulus m of the bonds' strengths (mean kept); 0: every bond as strong")         \
+  X(double, strength_seed, 0.0, WholeRange, 0.0, 9.0e15, "-", "bond strength_seed", true,     \
     "seed of the strengths' draw (a whole number)")
 
 namespace pelletdem {
