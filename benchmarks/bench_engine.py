@@ -163,7 +163,8 @@ def liggghts_settled_bed(n: int, x, r, steps: int, seed: int = 1):
     (cached), with springs k_n = k_t = k1: its linear spring has no plastic part, so it springs
     back from the overlaps that our hysteretic contacts hold at rest (10,000 bed: CN 4.5 fell to
     1.0 in 2,000 steps; to 0.3 with k_n = k2) before it comes to rest again."""
-    from liggghts_ref import K1, read_dump_bed, run_liggghts_bed
+    from liggghts_deck import K1, read_dump_bed
+    from liggghts_ref import run_liggghts_bed
 
     path = os.path.join(CACHE, f"liggghts_bed_{n}_{seed}_{steps}_k{K1:g}.npz")
     if os.path.exists(path):
@@ -287,7 +288,8 @@ def main(argv=None) -> int:
         x, r = settled_bed(n)
         row = {"n": n}
         sys.path.insert(0, HERE)
-        from liggghts_ref import K1, liggghts_available, run_liggghts_bed
+        from liggghts_deck import K1
+        from liggghts_ref import liggghts_available, run_liggghts_bed
 
         with_lg = not a.no_liggghts and liggghts_available()
         # Rounds in turn, the best of each case kept: on a shared machine the speed drifts by

@@ -4,7 +4,7 @@ Every python/pelletdem/*.py whose name does not start with an underscore gets a 
 ``api/<module>.md`` holding ``::: pelletdem.<module>`` (mkdocstrings renders its docstrings),
 and the compiled engine gets one from its type stub. A module added later (the discrepancy loop,
 say) is documented by the next build without touching mkdocs.yml. The laws' parameter tables
-in docs/parameters.md are made from the C++ rows (pelletdem.laws.markdown_table).
+in docs/parameters.md are made from the C++ rows (pelletdem.parameter_docs.markdown_table).
 """
 from __future__ import annotations
 
@@ -50,7 +50,7 @@ LAW_TABLES = {"<!-- law table: contact -->": "ContactLaw", "<!-- law table: bond
 def on_page_markdown(markdown, page, config, files, **kwargs):
     if any(marker in markdown for marker in LAW_TABLES):
         import pelletdem
-        from pelletdem.laws import markdown_table
+        from pelletdem.parameter_docs import markdown_table
 
         for marker, law in LAW_TABLES.items():
             markdown = markdown.replace(marker, markdown_table(getattr(pelletdem, law)))

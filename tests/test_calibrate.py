@@ -3,8 +3,8 @@ process pool, Dask), objectives, input checks, and parameter recovery.
 
 Most tests use a fast stand-in for the engine (`power_law_runner`: sigma_f, dL_f/D and the bulk
 density as power laws of the parameters, exponents deliberately off the paper's scaling laws)
-so the machinery is tested in milliseconds; `test_recovers_sigma_c_on_tiny_pellet` and
-`test_dask_local_cluster_runs_engine` run the real engine on the 'tiny' pellet.
+so the machinery is tested in milliseconds; test_calibrate_engine.py runs the real engine on
+the 'tiny' pellet.
 """
 import json
 import math
@@ -12,7 +12,6 @@ import os
 import subprocess
 import sys
 import threading
-import time
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
@@ -518,111 +517,3 @@ def test_other_bad_inputs_name_the_parameter():
     with pytest.raises(ValueError, match="material"):
         C.calibrate_variants([("teak", 8, 120)], runner=power_law_runner)
     assert CALLS == []
-
-
-# --- the real engine -------------------------------------------------------------------------
-
-TINY = dict(preset="tiny", sigma_z=120e6)
-TRUE_E_B, TRUE_SIGMA_C = 30e6, 9e6   # the tests' TINY_BOND (conftest): breaks the tiny pellet
-MAX_DLD = 0.15
-
-
-def test_recovers_sigma_c_on_tiny_pellet():
-    """Synthetic data from the engine at known (E_b, sigma_c), then a 1-parameter fit of sigma_c
-    at that E_b from a start a factor 2 off. Tolerance: the fit stops within 1 SD of the
-    synthetic sigma_f (SD 5%) and dL_f/D (SD 10%); sigma_c must come back within 20% (the tiny
-    pellet's sigma_f scatters by ~5% between bond laws a few % apart, see below).
-    Its dL_f/D is no smooth function of sigma_c at this size: sigma_c = 8.4-9.6 MPa in steps of
-    0.2 gave dL_f/D 0.102-0.122 in no order (SD 7 %, 2026-12-04), so an SD of 5 % made the
-    fit's success a matter of which rounding the build had. For the same reason the fit may
-    stop where its local model puts the optimum (within min_step of its best point), or find
-    no better point within a small step, with a loss a little above tol: builds differing in
-    rounding stopped at sigma_c = 9.8 MPa (loss 1.21) and 9.3 MPa (loss 1.19). Those stops are
-    the fit's own; the loss must be below 2. The slope of sigma_f in sigma_c wanders too:
-    sigma_c = 9, 10, 10.47 and 11 MPa gave sigma_f = 98.5, 104.5, 105.5 and 112.6 kPa
-    (2026-12-05), so a loss <= 1 (sigma_f within ~7 % of the data) admits sigma_c up to
-    ~16 % off, and the first Gauss-Newton step from 4.5 MPa landed at 10.47 MPa with loss
-    0.99. Hence sigma_c within 20 %."""
-    t0 = time.perf_counter()
-    spec = C.make_spec({"E_b": TRUE_E_B, "sigma_c": TRUE_SIGMA_C}, max_dLD=MAX_DLD, **TINY)
-    truth = C.run_point(spec)
-    assert truth["ok"], truth["error"]
-    out = truth["outputs"]
-    tg = C.Targets(sigma_z=120e6, sigma_f=out["sigma_f"], sigma_f_sd=0.05 * out["sigma_f"],
-                   dLf_D=out["dLf_D"], dLf_D_sd=0.10 * out["dLf_D"], label="synthetic")
-    r = C.fit({"sigma_c": (1e6, 1e8, TRUE_SIGMA_C / 2)}, tg, fixed={"E_b": TRUE_E_B}, preset="tiny",
-              max_dLD=MAX_DLD, tol=1.0, max_runs=6, executor="serial")
-    # Stopped by its own criteria (loss <= tol, or no better point nearby), not by max_runs.
-    assert r.converged or "min_step" in r.message or r.message.startswith("no better point"), (r.message, r.history)
-    assert r.loss < 2.0, (r.message, r.history)
-    assert r.params["sigma_c"] == pytest.approx(TRUE_SIGMA_C, rel=0.20)
-    assert r.n_relaxations == 0  # the relaxed pellet of the synthetic run was reused
-    assert r.n_points <= 5
-    print(f"recovered sigma_c = {r.params['sigma_c'] / 1e6:.3f} MPa (true 9) in {r.n_points} runs, "
-          f"{time.perf_counter() - t0:.1f} s")
-
-
-def test_dask_local_cluster_runs_engine(tmp_path):
-    """One real diametral run through a Dask LocalCluster (in-process worker, one thread), and the
-    resumed scan serves it from the cache."""
-    distributed = pytest.importorskip("distributed")
-    grid = {"E_b": [TRUE_E_B], "sigma_c": [TRUE_SIGMA_C]}
-    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
-                                  dashboard_address=None) as cluster, distributed.Client(cluster) as client:
-        res = C.scan(grid, None, cache_dir=tmp_path, executor=client, max_dLD=MAX_DLD, **TINY)
-    assert res.n_simulations == 1 and res.runs["ok"].all()
-    assert res.runs["sigma_f"].iloc[0] > 0 and 0 < res.runs["dLf_D"].iloc[0] <= MAX_DLD + 1e-9
-    again = C.scan(grid, None, cache_dir=tmp_path, executor="serial", max_dLD=MAX_DLD, **TINY)
-    assert again.n_simulations == 0 and again.n_cached == 1
-    assert again.runs["sigma_f"].iloc[0] == res.runs["sigma_f"].iloc[0]
-
-
-def test_relaxed_pellet_checkpoint_is_reused_bit_for_bit(tmp_path):
-    """With relaxed_dir, a worker without the pellet in memory loads the checkpoint instead of
-    compacting again, and breaks it exactly as the pellet it was saved from."""
-    spec = C.make_spec({"E_b": TRUE_E_B, "sigma_c": TRUE_SIGMA_C}, max_dLD=0.08, **TINY)
-    C.clear_memo()
-    first = C.run_point(spec, relaxed_dir=tmp_path)
-    assert first["ok"] and first["relaxed_from"] == ""
-    assert (tmp_path / f"{spec.relax_key}.h5").exists()
-    C.clear_memo()
-    second = C.run_point(spec, relaxed_dir=tmp_path)
-    assert second["relaxed_from"] == "disk"
-    assert second["outputs"] == first["outputs"]
-    assert second["curve"] == first["curve"]
-
-
-def test_branch_uses_its_own_diametral_settings():
-    """Two runs sharing a relaxed pellet but not max_dLD: each test ends where its spec says."""
-    short = C.make_spec({"E_b": TRUE_E_B, "sigma_c": TRUE_SIGMA_C}, max_dLD=0.03, **TINY)
-    longer = C.make_spec({"E_b": TRUE_E_B, "sigma_c": TRUE_SIGMA_C}, max_dLD=0.05, **TINY)
-    assert short.relax_key == longer.relax_key
-    a, b = C.run_point(short), C.run_point(longer)
-    assert b["relaxed_reused"]
-    assert max(a["curve"]["dL_D"]) == pytest.approx(0.03, abs=0.002)
-    assert max(b["curve"]["dL_D"]) == pytest.approx(0.05, abs=0.002)
-
-
-def test_calibrate_variants_relaxes_each_pellet_once_before_the_fits(tmp_path):
-    """Two variants at the same pressure on two worker processes: the pellet is relaxed once,
-    before the fits start (they used to start together, and both workers relaxed it)."""
-    rep = C.calibrate_variants([("oak", 8, 120), ("pine", 8, 120)], "tiny", compaction=None, max_runs=1,
-                               max_workers=2, cache_dir=tmp_path / "cache", relaxed_dir=tmp_path / "relaxed")
-    assert rep.n_relaxations == 1
-    assert rep.n_simulations == 3  # the density run and one point per variant
-    assert len(list((tmp_path / "relaxed").glob("*.h5"))) == 1
-
-
-def test_calibrate_variants_puts_back_a_missing_relaxed_pellet_once(tmp_path):
-    """A resumed calibration whose density runs are cached but whose relaxed pellet is gone
-    (deleted, or written by a sitting that was killed) relaxes it again once, in the first pass,
-    and not once per worker that gets a run at that pressure."""
-    kw = dict(compaction=None, max_runs=1, max_workers=2, cache_dir=tmp_path / "cache",
-              relaxed_dir=tmp_path / "relaxed")
-    C.calibrate_variants([("oak", 8, 120)], "tiny", **kw)
-    (pellet,) = (tmp_path / "relaxed").glob("*.h5")
-    pellet.unlink()
-    rep = C.calibrate_variants([("oak", 8, 120), ("pine", 8, 120), ("birch", 8, 120)], "tiny", **kw)
-    assert rep.n_relaxations == 1
-    assert rep.n_simulations == 3  # the density run again and one new point per new variant
-    assert [p.name for p in (tmp_path / "relaxed").glob("*.h5")] == [pellet.name]

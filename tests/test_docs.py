@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 
 from pelletdem.engine import BondLaw, ContactLaw
-from pelletdem.laws import markdown_table
+from pelletdem.parameter_docs import markdown_table
 from pelletdem.presets import Preset
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -19,7 +19,7 @@ from scipy.spatial import cKDTree
 from scipy.stats import spearmanr
 
 import pelletdem
-from pelletdem import ParameterError, caliper, cracks, pipeline, stages
+from pelletdem import ParameterError, caliper, cracks, pellet_measures, pipeline, stages
 from pelletdem.engine import BondLaw
 from pelletdem.presets import get_preset
 
@@ -43,7 +43,7 @@ def _pair_overlaps(x, r):
 
 
 def _extent(x, r):
-    """(diameter, height, centre x, centre y) as stages.pellet_extent computes them, m."""
+    """(diameter, height, centre x, centre y) as pellet_measures.pellet_extent computes them, m."""
     cx, cy = x[:, 0].mean(), x[:, 1].mean()
     d = 2.0 * (np.hypot(x[:, 0] - cx, x[:, 1] - cy) + r).max()
     h = (x[:, 2] + r).max() - (x[:, 2] - r).min()
@@ -60,7 +60,7 @@ def test_every_stage_ran_in_order(life):
         assert st.wall_time_s >= 0.0
         assert name in life.result.snapshots
         for key, arr in st.series.items():
-            if key == "inertia_number":  # inf by definition where the stress is 0 (stages.inertia_number)
+            if key == "inertia_number":  # inf by definition where the stress is 0 (pellet_measures.inertia_number)
                 p = st.series["sigma_z" if name == "compact" else "sigma_1"]
                 assert np.all(np.isfinite(arr[p > 0])) and np.all(np.isinf(arr[p <= 0])), name
                 continue
@@ -309,13 +309,13 @@ def test_main_piece_leaves_out_shed_particles():
     x = np.array([[0.0, 0.0, 0.0], [1.9 * r, 0.0, 0.0], [3.8 * r, 0.0, 0.0], [0.008, 0.0, 0.0]])
     w.add_particles(x, np.full(4, r))
     w.run(1)  # contacts are found by a force evaluation
-    mask = stages.main_piece(w)
+    mask = pellet_measures.main_piece(w)
     assert mask.tolist() == [True, True, True, False]
-    d, h, cx, cy = stages.pellet_extent(w, mask)
+    d, h, cx, cy = pellet_measures.pellet_extent(w, mask)
     assert cx == pytest.approx(1.9 * r, rel=1e-4) and cy == pytest.approx(0.0, abs=1e-12)
     assert d == pytest.approx(2.0 * (1.9 * r + r), rel=1e-4)
     assert h == pytest.approx(2.0 * r, rel=1e-4)
-    assert stages.pellet_extent(w)[0] > 0.01  # every particle: the shed one sets the width
+    assert pellet_measures.pellet_extent(w)[0] > 0.01  # every particle: the shed one sets the width
 
 
 @pytest.mark.parametrize("value", [-0.1, 1.5, float("nan"), "0.3"])
@@ -349,9 +349,9 @@ def test_bonded_pellet_is_one_piece(life):
 
 def test_largest_cluster_fraction():
     i, j = np.array([0, 1, 3]), np.array([1, 2, 4])
-    assert stages.largest_cluster_fraction(6, i, j) == pytest.approx(0.5)
-    assert stages.largest_cluster_fraction(3, np.array([], int), np.array([], int)) == pytest.approx(1 / 3)
-    assert stages.largest_cluster_fraction(0, i[:0], j[:0]) == 0.0
+    assert pellet_measures.largest_cluster_fraction(6, i, j) == pytest.approx(0.5)
+    assert pellet_measures.largest_cluster_fraction(3, np.array([], int), np.array([], int)) == pytest.approx(1 / 3)
+    assert pellet_measures.largest_cluster_fraction(0, i[:0], j[:0]) == 0.0
 
 
 # --- diametral -------------------------------------------------------------------------------

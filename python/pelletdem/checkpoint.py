@@ -200,7 +200,7 @@ class RunCheckpoint:
             try:
                 saved_args = json.loads(f.attrs["run_args"])
                 self._check_args(saved_args)
-                result = Result._read(f["result"])
+                result = Result.read_group(f["result"])
                 stages_done = json.loads(f.attrs["stages_done"])
                 pg = f["pellet"]
                 pellet = {k: float(pg.attrs[k]) for k in _PELLET_FIELDS}
@@ -289,7 +289,7 @@ class RunCheckpoint:
             f.attrs["run_args"] = json.dumps(self.run_args)
             f.attrs["stages_done"] = json.dumps(list(result.stages))
             f.attrs["wall_time_s"] = self._prior_wall_time + time.monotonic() - self._t0
-            result._write(f.create_group("result"))
+            result.write_group(f.create_group("result"))
             pg = f.create_group("pellet")
             for k in _PELLET_FIELDS:
                 pg.attrs[k] = pellet[k]

@@ -15,7 +15,7 @@ from typing import Any, List
 
 from . import _core
 
-__all__ = ["ContactLaw", "BondLaw", "ParamRow", "law_rows", "markdown_table"]
+__all__ = ["ContactLaw", "BondLaw", "ParamRow", "law_rows", "allowed_values"]
 
 ParamRow = _core.ParamRow
 
@@ -26,7 +26,7 @@ def law_rows(core_params) -> List[Any]:
     return list(core_params.rows())
 
 
-def _allowed(row) -> str:
+def allowed_values(row) -> str:
     """The allowed values of a row, as a person reads them."""
     unit = "" if row.unit == "-" else f" {row.unit}"
     if row.type == "bool":
@@ -45,7 +45,7 @@ def _docstring(summary: str, rows) -> str:
     for r in rows:
         default = bool(r.default) if r.type == "bool" else f"{r.default:g}"
         unit = "" if r.unit == "-" else f", {r.unit}"
-        lines.append(f"- ``{r.name}``{unit}: {r.doc} (default {default}; {_allowed(r)}).")
+        lines.append(f"- ``{r.name}``{unit}: {r.doc} (default {default}; {allowed_values(r)}).")
     return "\n".join(lines)
 
 
@@ -101,25 +101,3 @@ BondLaw: Any = _law_class(
     "BondLaw", _core.BondParams,
     "Parallel-bond parameters (eq. 12-15) and the bonds' candidate effects, SI units.", {})
 
-
-def markdown_table(law) -> str:
-    """``law``'s parameter table (ContactLaw or BondLaw) as a Markdown table: field, unit,
-    default, allowed values and what it is, with the candidate effect it belongs to, if any
-    (docs/parameters.md is made with it)."""
-    from .effects import EFFECTS
-
-    prefix = "contact." if law is ContactLaw else "bond."
-    owner = {}
-    for e in EFFECTS.values():
-        for p in (e.param, *e.fixed):
-            if p.startswith(prefix):
-                owner[p[len(prefix):]] = e
-    lines = ["| field | unit | default | allowed | what it is |", "|---|---|---|---|---|"]
-    for r in law.rows():
-        default = str(bool(r.default)) if r.type == "bool" else f"{r.default:g}"
-        doc = r.doc
-        e = owner.get(r.name)
-        if e is not None:
-            doc += f" (candidate effect `{e.name}`, acting in the {e.stage} stage)"
-        lines.append(f"| `{r.name}` | {r.unit} | {default} | {_allowed(r)} | {doc} |")
-    return "\n".join(lines)

@@ -20,10 +20,10 @@ The report is :func:`pelletdem.loop_report.write_report` (and ``pelletdem loop``
 """
 from __future__ import annotations
 
-from .loop_data import COMPACTION_SPLIT, DIAMETRAL_PARTS, QUANTITIES, Condition, Dataset, Observation, synthetic_dataset
+from .loop_data import COMPACTION_SPLIT, DIAMETRAL_PARTS, QUANTITIES, Condition, Dataset, Observation
 from .loop_fit import FitState, fit_model
 from .loop_selection import Candidate, LoopResult, close_loop
-from .loop_simulators import EngineSimulator, FunctionSimulator, Prediction, Simulator
+from .loop_simulators import EngineSimulator, FunctionSimulator, Prediction, Simulator, synthetic_dataset
 
 __all__ = [
     "Condition", "Observation", "Dataset", "Prediction", "Simulator", "FunctionSimulator",

@@ -4,7 +4,7 @@ collected in a :class:`Dataset`.
 An observation is one measured number (a value, its replicate SD, where it lies on which
 curve of which condition). A dataset is built from the paper's tables
 (:meth:`Dataset.from_paper`), from measured curves (:meth:`Dataset.from_curves`) or made by
-:func:`synthetic_dataset` with a hidden effect. Values are in the SI unit of each quantity
+:func:`pelletdem.loop_simulators.synthetic_dataset` with a hidden effect. Values are in the SI unit of each quantity
 (:data:`QUANTITIES`).
 """
 from __future__ import annotations
@@ -12,17 +12,14 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Callable, Dict, List, Mapping, Optional, Sequence, Tuple
+from typing import Callable, Dict, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 
 from .metrics import DEFAULT_REL_SD_FLOOR
 
-if TYPE_CHECKING:
-    from .loop_simulators import Simulator
-
 __all__ = ["QUANTITIES", "DIAMETRAL_PARTS", "COMPACTION_SPLIT", "Condition", "Observation", "Dataset",
-           "synthetic_dataset"]
+           "diametral_part"]
 
 #: Observable quantities: name -> (unit, meaning).
 QUANTITIES: Dict[str, Tuple[str, str]] = {
@@ -98,7 +95,9 @@ class Observation:
         return max(self.sd, DEFAULT_REL_SD_FLOOR * abs(self.value), 1e-300)
 
 
-def _diametral_part(x: float, x_f: float) -> str:
+def diametral_part(x: float, x_f: float) -> str:
+    """The part of a diametral curve (DIAMETRAL_PARTS) that x = dL/D lies in, for a curve
+    that fails at x_f (-)."""
     for bound, name in DIAMETRAL_PARTS:
         if x < bound * x_f:
             return name
@@ -216,7 +215,7 @@ class Dataset:
                 x_f = pk.dLf_D_mean
                 for x, m, s in zip(mc.x, mc.mean, mc.sd):
                     obs.append(Observation(cond, "sigma_1", float(x), float(m), float(np.nan_to_num(s)), nrep,
-                                           _diametral_part(x, x_f)))
+                                           diametral_part(x, x_f)))
                 if scalars:
                     obs.append(Observation(cond, "sigma_f", float("nan"), pk.sigma_f_mean,
                                            float(np.nan_to_num(pk.sigma_f_sd)), nrep))
@@ -228,56 +227,3 @@ class Dataset:
                     obs.append(Observation(cond, "sigma_z", float(x), float(m), float(np.nan_to_num(s)), nrep,
                                            "compaction-low" if x < split else "compaction-high"))
         return cls(obs, name)
-
-
-
-def synthetic_dataset(sim: Simulator, truth: Mapping[str, float], conditions: Sequence[Condition], *,
-                      noise: float = 0.05, replicates: int = 5, points: int = 12,
-                      quantities: Sequence[str] = ("sigma_1", "sigma_f", "dLf_D", "bulk_density"),
-                      compaction_points: int = 0, seed: int = 0, name: str = "synthetic") -> Dataset:
-    """"Measured" data made by ``sim`` with parameters ``truth`` (which may switch on any
-    effect, in the library or not), with Gaussian noise of relative SD ``noise`` per replicate
-    (curve points: relative to the curve's peak), ``replicates`` replicates averaged, so the
-    reported SD is the replicates' sample SD. ``points`` points per diametral curve from
-    0.1 to 1.6 x its failure point (within the simulated range); ``compaction_points`` on the
-    compaction curve (0: none). Nothing in the returned Dataset says which effect made it.
-    """
-    if not (isinstance(noise, (int, float)) and 0 <= noise < 1):
-        raise ValueError(f"noise = {noise!r} is out of range: allowed 0 <= noise < 1")
-    if not isinstance(replicates, int) or not 2 <= replicates <= 100:
-        raise ValueError(f"replicates = {replicates!r} is out of range: allowed 2 <= replicates <= 100")
-    rng = np.random.default_rng(seed)
-    preds = sim.predict(dict(truth), list(conditions))
-    obs = []
-
-    def noisy(mean: float, scale: float) -> Tuple[float, float]:
-        draws = mean + noise * scale * rng.standard_normal(replicates)
-        return float(draws.mean()), float(draws.std(ddof=1))
-
-    for c in conditions:
-        p = preds[c]
-        if not p.ok:
-            raise RuntimeError(f"the truth's simulation of {c.label} failed: {p.error}")
-        x_f = p.scalars.get("dLf_D", float("nan"))
-        if "sigma_1" in quantities and p.curve is not None:
-            x, y = np.asarray(p.curve[0]), np.asarray(p.curve[1])
-            top = float(np.max(y))
-            hi = min(1.6 * x_f, float(x.max()))
-            for xi in np.linspace(0.1 * x_f, hi, points):
-                m, s = noisy(float(np.interp(xi, x, y)), top)
-                obs.append(Observation(c, "sigma_1", float(xi), m, s, replicates, _diametral_part(xi, x_f)))
-        if compaction_points and p.compaction is not None:
-            x, y = np.asarray(p.compaction[0]), np.asarray(p.compaction[1])
-            order = np.argsort(x)
-            x, y = x[order], y[order]
-            top = float(np.max(y))
-            for xi in np.linspace(0.3 * x.max(), x.max(), compaction_points):
-                m, s = noisy(float(np.interp(xi, x, y)), top)
-                obs.append(Observation(c, "sigma_z", float(xi), m, s, replicates,
-                                       "compaction-low" if xi < COMPACTION_SPLIT else "compaction-high"))
-        for q in ("sigma_f", "dLf_D", "bulk_density"):
-            if q in quantities and math.isfinite(p.scalars.get(q, float("nan"))):
-                v = p.scalars[q]
-                m, s = noisy(v, abs(v))
-                obs.append(Observation(c, q, float("nan"), m, s, replicates))
-    return Dataset(obs, name)

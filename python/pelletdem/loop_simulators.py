@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import math
 from dataclasses import dataclass, field
 from typing import Callable, Dict, List, Mapping, Optional, Sequence, Tuple
 
@@ -17,12 +18,12 @@ import numpy as np
 
 from .engine import BondLaw
 from .execution import Evaluator, open_executor, with_relaxed_dir
-from .loop_data import Condition, Observation
+from .loop_data import COMPACTION_SPLIT, Condition, Dataset, Observation, diametral_part
 from .run_cache import RunCache
 from .runs import make_spec, run_setup
 from .worker import run_point
 
-__all__ = ["Prediction", "Simulator", "FunctionSimulator", "EngineSimulator"]
+__all__ = ["Prediction", "Simulator", "FunctionSimulator", "EngineSimulator", "synthetic_dataset"]
 
 
 @dataclass
@@ -205,3 +206,54 @@ def _prediction_from_records(recs: Sequence[dict]) -> Prediction:
                         for r in recs])
     return Prediction(curve, comp, sc)
 
+
+def synthetic_dataset(sim: Simulator, truth: Mapping[str, float], conditions: Sequence[Condition], *,
+                      noise: float = 0.05, replicates: int = 5, points: int = 12,
+                      quantities: Sequence[str] = ("sigma_1", "sigma_f", "dLf_D", "bulk_density"),
+                      compaction_points: int = 0, seed: int = 0, name: str = "synthetic") -> Dataset:
+    """"Measured" data made by ``sim`` with parameters ``truth`` (which may switch on any
+    effect, in the library or not), with Gaussian noise of relative SD ``noise`` per replicate
+    (curve points: relative to the curve's peak), ``replicates`` replicates averaged, so the
+    reported SD is the replicates' sample SD. ``points`` points per diametral curve from
+    0.1 to 1.6 x its failure point (within the simulated range); ``compaction_points`` on the
+    compaction curve (0: none). Nothing in the returned Dataset says which effect made it.
+    """
+    if not (isinstance(noise, (int, float)) and 0 <= noise < 1):
+        raise ValueError(f"noise = {noise!r} is out of range: allowed 0 <= noise < 1")
+    if not isinstance(replicates, int) or not 2 <= replicates <= 100:
+        raise ValueError(f"replicates = {replicates!r} is out of range: allowed 2 <= replicates <= 100")
+    rng = np.random.default_rng(seed)
+    preds = sim.predict(dict(truth), list(conditions))
+    obs = []
+
+    def noisy(mean: float, scale: float) -> Tuple[float, float]:
+        draws = mean + noise * scale * rng.standard_normal(replicates)
+        return float(draws.mean()), float(draws.std(ddof=1))
+
+    for c in conditions:
+        p = preds[c]
+        if not p.ok:
+            raise RuntimeError(f"the truth's simulation of {c.label} failed: {p.error}")
+        x_f = p.scalars.get("dLf_D", float("nan"))
+        if "sigma_1" in quantities and p.curve is not None:
+            x, y = np.asarray(p.curve[0]), np.asarray(p.curve[1])
+            top = float(np.max(y))
+            hi = min(1.6 * x_f, float(x.max()))
+            for xi in np.linspace(0.1 * x_f, hi, points):
+                m, s = noisy(float(np.interp(xi, x, y)), top)
+                obs.append(Observation(c, "sigma_1", float(xi), m, s, replicates, diametral_part(xi, x_f)))
+        if compaction_points and p.compaction is not None:
+            x, y = np.asarray(p.compaction[0]), np.asarray(p.compaction[1])
+            order = np.argsort(x)
+            x, y = x[order], y[order]
+            top = float(np.max(y))
+            for xi in np.linspace(0.3 * x.max(), x.max(), compaction_points):
+                m, s = noisy(float(np.interp(xi, x, y)), top)
+                obs.append(Observation(c, "sigma_z", float(xi), m, s, replicates,
+                                       "compaction-low" if xi < COMPACTION_SPLIT else "compaction-high"))
+        for q in ("sigma_f", "dLf_D", "bulk_density"):
+            if q in quantities and math.isfinite(p.scalars.get(q, float("nan"))):
+                v = p.scalars[q]
+                m, s = noisy(v, abs(v))
+                obs.append(Observation(c, q, float("nan"), m, s, replicates))
+    return Dataset(obs, name)

@@ -70,12 +70,12 @@ class Result:
         leaves any previous file whole) and, if `xdmf`, an XDMF file beside it. Returns path."""
         path = os.fspath(path)
         with atomic_h5(path, FORMAT) as f:
-            self._write(f)
+            self.write_group(f)
         if xdmf:
             write_xdmf(self, path)
         return path
 
-    def _write(self, f) -> None:
+    def write_group(self, f) -> None:
         """Everything into an open HDF5 file or group (a checkpoint keeps a Result in one)."""
         f.attrs["version"] = self.version
         f.attrs["seed"] = self.seed
@@ -99,14 +99,14 @@ class Result:
         ResultFileError naming the file and what is wrong."""
         with open_h5(path, FORMAT, ResultFileError, "pelletdem result") as f:
             try:
-                return cls._read(f)
+                return cls.read_group(f)
             except (OSError, KeyError, ValueError, TypeError) as e:
                 # HDF5 notices a cut-off end when opening, damage inside only when reading.
                 raise ResultFileError(f"{path}: damaged pelletdem result "
                                       f"({type(e).__name__}: {e})") from None
 
     @classmethod
-    def _read(cls, f) -> "Result":
+    def read_group(cls, f) -> "Result":
         """The Result in an open pelletdem HDF5 file (KeyError/OSError when it is damaged)."""
         res = cls(params=json.loads(f.attrs["params"]), seed=int(f.attrs["seed"]),
                   version=str(f.attrs["version"]))

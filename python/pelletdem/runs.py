@@ -91,7 +91,7 @@ def canonical(v, where: str = "value"):
 
 
 _FINGERPRINT: Optional[str] = None
-_FINGERPRINT_FILES = ("engine.py", "laws.py", "world.py", "checks.py", "caliper.py", "stages.py",
+_FINGERPRINT_FILES = ("engine.py", "laws.py", "world.py", "checks.py", "caliper.py", "pellet_measures.py", "stages.py",
                       "pipeline.py", "presets.py")
 
 

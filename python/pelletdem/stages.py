@@ -16,8 +16,14 @@ from typing import Dict, Optional
 
 import numpy as np
 
-from . import caliper
 from .engine import BondLaw, ParameterError, World, random_pack_cylinder, truncated_normal_radii
+from .pellet_measures import (
+    bulk_coordination_number,
+    inertia_number,
+    largest_cluster_fraction,
+    main_piece,
+    measure,
+)
 from .presets import Preset
 
 
@@ -131,56 +137,6 @@ def check_sigma_z(sigma_z) -> float:
     if v > 1e9:
         raise ParameterError(f"sigma_z = {v} Pa is out of range: allowed 0 < sigma_z <= 1e9 Pa")
     return v
-
-
-def _largest_group(n: int, i: np.ndarray, j: np.ndarray) -> np.ndarray:
-    """Boolean mask of the largest group of the n particles connected through pairs (i, j)."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
-    if n == 0:
-        return np.zeros(0, dtype=bool)
-    _, labels = connected_components(coo_matrix((np.ones(len(i)), (i, j)), shape=(n, n)), directed=False)
-    return labels == np.argmax(np.bincount(labels))
-
-
-def main_piece(world: World) -> np.ndarray:
-    """Boolean mask of the particles in the largest group connected by contacts or intact
-    bonds: the pellet, without loose particles it may have shed."""
-    c, b = world.contacts(), world.bonds()
-    intact = b["mode"] == 0
-    i = np.concatenate([c["i"], b["i"][intact]]).astype(np.int64)
-    j = np.concatenate([c["j"], b["j"][intact]]).astype(np.int64)
-    return _largest_group(world.n, i, j)
-
-
-def pellet_extent(world: World, mask: Optional[np.ndarray] = None) -> tuple:
-    """(diameter, height, centre x, centre y) of the outermost surfaces of the particles in
-    `mask` (all by default), m: one protruding sphere sets them (see :func:`measure`)."""
-    x = np.asarray(world.x)
-    r = np.asarray(world.r)
-    if mask is not None:
-        x, r = x[mask], r[mask]
-    cx, cy = x[:, 0].mean(), x[:, 1].mean()
-    rho = np.hypot(x[:, 0] - cx, x[:, 1] - cy) + r
-    height = (x[:, 2] + r).max() - (x[:, 2] - r).min()
-    return 2.0 * rho.max(), height, cx, cy
-
-
-def measure(pellet: Pellet, mask: np.ndarray) -> caliper.PelletSize:
-    """Size and density of the particles in `mask` (the pellet's main piece) as a caliper and
-    a balance read them (:mod:`pelletdem.caliper`; masses unscaled)."""
-    w = pellet.world
-    return caliper.pellet_size(np.asarray(w.x)[mask], np.asarray(w.r)[mask],
-                               np.asarray(w.m)[mask] / pellet.preset.density_scale)
-
-
-def bulk_coordination_number(world: World, mask: np.ndarray, size: caliper.PelletSize) -> float:
-    """Mean contacts per particle over the particles of `mask` that `size` counts as bulk
-    (size.bulk_depth or more below the enclosed surface)."""
-    c = world.contacts()
-    z = caliper.contacts_per_particle(world.n, c["i"], c["j"])
-    return float(z[np.nonzero(mask)[0][size.bulk]].mean())
 
 
 def calm(world) -> float:
@@ -305,13 +261,6 @@ def _piston_series(pellet: Pellet) -> dict:
             "bulk_density": bd, "coordination_number": glob["coordination_number"],
             "mould_radial_force": mould["normal_force"], "max_overlap_ratio": glob["max_overlap_ratio"],
             "kinetic_energy": glob["kinetic_energy"]}
-
-
-def inertia_number(strain_rate, d_mean: float, density: float, pressure) -> np.ndarray:
-    """I = strain_rate d sqrt(rho / p) (dimensionless); inf where p <= 0."""
-    p = np.asarray(pressure, dtype=float)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(p > 0, np.asarray(strain_rate) * d_mean * np.sqrt(density / np.where(p > 0, p, 1.0)), np.inf)
 
 
 def compact(pellet: Pellet, sigma_z: float, speed: Optional[float] = None,
@@ -460,7 +409,7 @@ def relax(pellet: Pellet, ke_threshold: Optional[float] = None, max_time: Option
     s = w.samples()
     # Particles the pellet shed are not part of it: a caliper would not measure them.
     piece = main_piece(w)
-    size = measure(pellet, piece)
+    size = measure(pellet.world, piece)
     pellet.diameter, pellet.height = size.diameter, size.height
     pellet.snapshot("relax")
     return StageResult("relax", series={"time": s["time"], "kinetic_energy": s["kinetic_energy"],
@@ -481,11 +430,6 @@ def relax(pellet: Pellet, ke_threshold: Optional[float] = None, max_time: Option
 
 # --- bond / diametral -------------------------------------------------------------------------
 
-def largest_cluster_fraction(n: int, i: np.ndarray, j: np.ndarray) -> float:
-    """Fraction of the n particles in the largest group connected through the pairs (i, j)."""
-    return float(_largest_group(n, i, j).sum() / n) if n > 0 else 0.0
-
-
 def bond(pellet: Pellet, law: BondLaw, ramp_time: Optional[float] = None,
          progress: Optional[bool] = None) -> StageResult:
     """Parallel bonds on the relaxed pellet's contacts; adhesion then ramps to zero over
@@ -504,7 +448,7 @@ def bond(pellet: Pellet, law: BondLaw, ramp_time: Optional[float] = None,
     b = w.bonds()
     intact = b["mode"] == 0
     frac = largest_cluster_fraction(w.n, b["i"][intact], b["j"][intact])
-    size = measure(pellet, main_piece(w))
+    size = measure(pellet.world, main_piece(w))
     pellet.diameter, pellet.height = size.diameter, size.height
     pellet.snapshot("bond")
     s = w.samples()
@@ -552,7 +496,7 @@ def diametral(pellet: Pellet, speed: Optional[float] = None, max_dLD: Optional[f
         w.set_velocities(vel, spin)
     # Eq. 4's R_p and h_p and the D of dL/D: the pellet's size as a caliper reads it before
     # the test.
-    size = measure(pellet, piece)
+    size = measure(pellet.world, piece)
     d, h = size.diameter, size.height
     cx, _ = size.centre
     x, r = np.asarray(w.x), np.asarray(w.r)
