@@ -1,7 +1,7 @@
 """Quasi-static check: the tensile strength does not depend on the loading speed.
 
 The loading in the simulation is ~1000 times faster than the laboratory's (see NOTES and the
-README's "Quasi-static control"); the usual check is that halving the speeds changes the
+docs/model.md, "Quasi-static control"); the usual check is that halving the speeds changes the
 result by little. Here every speed of the default 'quick' preset (2500 particles, 5 mm mould)
 is halved -- piston down and up, mould opening and plates -- and sigma_f must move by less
 than 5 %. The bonds are the paper's Table 5 oak ones (MC 8 %, 120 MPa: E_b = 120 MPa,
@@ -9,7 +9,7 @@ sigma_c = tau_c = 36 MPa), with which the quick pellet peaks near dL/D = 0.1; th
 on to dL/D = 0.15 so the peak is inside it.
 
 One pellet's peak also moves by several per cent with nothing but the packing changed (the
-breakage is chaotic: see the README's reproducibility figures), so the test compares the mean
+breakage is chaotic: see the reproducibility figures in docs/reliability.md), so the test compares the mean
 sigma_f over two packing seeds at each speed.
 
 Slow (four quick pellets on one thread, two at half speed: ~8 min): `pytest -m slow`.

@@ -1,7 +1,7 @@
 """pelletdem: DEM with a bonded particle model for wood-sawdust pellets.
 
 The C++ engine (``pelletdem._core``) steps; this package arranges stages, scans, fits and
-plots. See the README for the model, its parameters and their sources.
+plots. docs/model.md describes the model, docs/parameters.md its parameters and their sources.
 """
 import os as _os
 

@@ -52,7 +52,7 @@ def k1_from_yield_strength(p_y: float, r: float = 2e-4) -> float:
 
     Convention: r is the particle radius, which reproduces Table 4 (p_y = 100 MPa,
     r = 0.2 mm -> 1e5 N/m). Eq. 7 literally uses r* = r_i r_j/(r_i + r_j), half of that for
-    equal spheres (5e4 N/m); see NOTES in the README.
+    equal spheres (5e4 N/m); see docs/inconsistencies.md.
     """
     return 5.0 * finite("r", r) * finite("p_y", p_y)
 

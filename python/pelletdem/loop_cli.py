@@ -82,7 +82,7 @@ def run(args) -> int:
         # per material E_b and sigma_c shared by both pressures and moisture contents; the
         # paper fits each variant on its own (24 parameters for 24 numbers)
         bounds = {f"{p}[{m}]": b for m in mats for p, b in (("E_b", (1e5, 1e10)), ("sigma_c", (1e4, 1e9)))}
-        # where issue 5's per-variant calibration of the small presets landed (Table 5's values
+        # where the per-variant calibration of the small presets landed (Table 5's values
         # are for the paper's denser pellets; a tiny pellet needs far stiffer, stronger bonds)
         start = {f"{p}[{m}]": v for m in mats for p, v in (("E_b", args.start_e_b), ("sigma_c", args.start_sigma_c))}
         held = lambda c: c.mc == 20 and c.sigma_z == 60e6  # noqa: E731

@@ -14,7 +14,7 @@ class Preset:
     n_particles: particle count. mould_diameter: D_c, m. radius_mean/sd/min/max: truncated
     normal radii, m. density: particle density, kg/m^3; density_scale: mass factor (gravity
     divided by it). dt: time step, s. piston_speed, unload_speed, plate_speed, demould_rate: m/s
-    (the laboratory's 3.3e-5 m/s is out of reach, see README "Quasi-static control").
+    (the laboratory's 3.3e-5 m/s is out of reach, see docs/model.md, "Quasi-static control").
     fill_solid_fraction: solid fraction of the random-placement region (-). fill_gravity_factor:
     gravity is raised by this factor while the bed settles (-). ke_threshold: relaxation ends
     when the kinetic energy (scaled mass) falls below it, J. release_damping_ratio: viscous
