@@ -68,6 +68,8 @@ struct ContactLawParams {
   // True when pairs see only what the four-lane pair kernel implements: every row it lacks
   // keeps its default (no size scaling, normal damping or effect on pairs).
   bool plain_pairs() const { return true PELLETDEM_CONTACT_ALL_ROWS(PELLETDEM_PARAM_LANES); }
+  // True when every effect's row keeps its default: the law is the paper's.
+  bool effects_off() const { return true PELLETDEM_CONTACT_EFFECT_ROWS(PELLETDEM_PARAM_AT_DEFAULT); }
   static std::vector<ParamRow> rows() { return {PELLETDEM_CONTACT_ALL_ROWS(PELLETDEM_PARAM_ROW)}; }
 };
 
@@ -97,6 +99,9 @@ class HystereticLaw {
     const double lne = std::log(p.restitution());
     // eq. 10's damping factor sqrt(4 / (1 + (pi / ln e)^2)); e = 1 means no damping.
     damping_factor_ = (lne < 0.0) ? std::sqrt(4.0 / (1.0 + (kPi / lne) * (kPi / lne))) : 0.0;
+    // With every effect's rows at their defaults (the paper's law) the hooks are skipped: they
+    // would give back what they are given, at a few branches per contact.
+    effects_ = !p.effects_off();
   }
 
   const ContactLawParams& params() const { return p_; }
@@ -113,24 +118,24 @@ class HystereticLaw {
 
   // Loading branch force at overlap delta (eq. 5 first line, and the effects').
   PELLETDEM_INLINE double loading_force(double delta, double k1, double r_eff) const {
-    return ContactEffects::loading_force(p_, k1 * delta, delta, r_eff);
+    return effects_ ? ContactEffects::loading_force(p_, k1 * delta, delta, r_eff) : k1 * delta;
   }
 
   // Unloading stiffness at residual overlap delta0 (k2 unless an effect shapes it).
   PELLETDEM_INLINE double unloading_stiffness(double k2, double delta0, double r_eff) const {
-    return ContactEffects::unloading_stiffness(p_, k2, delta0, r_eff);
+    return effects_ ? ContactEffects::unloading_stiffness(p_, k2, delta0, r_eff) : k2;
   }
 
   // Residual overlap that puts force f on the unloading line through delta.
   PELLETDEM_INLINE double residual_for(double delta, double f, double k2, double r_eff) const {
     // f times 1/k2, not f / k2: the pair kernel hoists the reciprocal of its constant k2.
     const double plain = delta - f * (1.0 / k2);
-    return ContactEffects::residual(p_, plain, delta, f, k2, r_eff);
+    return effects_ ? ContactEffects::residual(p_, plain, delta, f, k2, r_eff) : plain;
   }
 
   // Largest loading force of a wall contact of a particle of radius r, N (kHuge: none).
   PELLETDEM_INLINE double wall_load_cap(double r, bool crushable) const {
-    return ContactEffects::wall_load_cap(p_, kHuge, r, crushable);
+    return effects_ ? ContactEffects::wall_load_cap(p_, kHuge, r, crushable) : kHuge;
   }
 
   // Normal force of eq. 5; updates the residual overlap delta0 so the unloading line moves
@@ -194,6 +199,7 @@ class HystereticLaw {
  private:
   ContactLawParams p_;
   double damping_factor_ = 0.0;
+  bool effects_ = false;  // some effect's row is off its default
 };
 
 }  // namespace pelletdem

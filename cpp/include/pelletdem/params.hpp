@@ -76,5 +76,8 @@ inline void check_param(Check check, const char* label, double value, double lo,
 // True while every row that the four-lane kernel lacks keeps its default.
 #define PELLETDEM_PARAM_LANES(type, name, def, check, lo, hi, unit, label, lanes, doc) \
   &&(lanes || name == static_cast<type>(def))
+// True while every row keeps its default.
+#define PELLETDEM_PARAM_AT_DEFAULT(type, name, def, check, lo, hi, unit, label, lanes, doc) \
+  &&(name == static_cast<type>(def))
 
 }  // namespace pelletdem
