@@ -20,8 +20,9 @@ PELLETDEM_INLINE void pack_block(long b, long e, const Particles& p, double inv_
                                  PosRad* xr, Motion* mo, double* spin_inv, double* len) {
   alignas(32) double inertia[kBlock], cap[kBlock], inv[kBlock];
   const int nb = static_cast<int>(e - b);
-  // The callers' blocks hold 1 to kBlock particles; said so, GCC no longer warns of writes past
-  // the arrays on paths that cannot happen.
+  // The callers' blocks hold 1 to kBlock particles (kBlock a multiple of 4); said so, GCC no
+  // longer warns of writes past the arrays on paths that cannot happen.
+  static_assert(kBlock % 4 == 0, "blocks are whole runs of four");
   if (nb < 1 || nb > kBlock) __builtin_unreachable();
   for (int k = 0; k < nb; ++k) {
     const long i = b + k;
@@ -32,8 +33,12 @@ PELLETDEM_INLINE void pack_block(long b, long e, const Particles& p, double inv_
   if (rolling) {
     // Four at a time, written as vectors (the loop vectorizer left it scalar); the tail of a
     // short block computes on zeros that nobody reads.
-    for (int k = nb; k < (nb + 3) / 4 * 4; ++k) len[k] = inertia[k] = 0.0;
+    for (int k = nb; k < (nb + 3) / 4 * 4; ++k) {
+      if (k >= kBlock) __builtin_unreachable();
+      len[k] = inertia[k] = 0.0;
+    }
     for (int k = 0; k < nb; k += 4) {
+      if (k > kBlock - 4) __builtin_unreachable();
       typedef double V4 __attribute__((vector_size(32)));
       V4 l2, inr, wl;
       std::memcpy(&l2, len + k, sizeof l2);
