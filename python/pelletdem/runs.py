@@ -6,8 +6,9 @@ compaction pressure sigma_z (Pa), the seed and, for a diametral run, the bond la
 (:attr:`RunSpec.key`) is a SHA-256 of every field that changes the result (all preset fields
 but the name, sigma_z, seed, bond law, the package version, the cache format and
 :func:`engine_fingerprint`, a hash of the compiled engine and of the Python stage code, so a
-rebuilt or edited engine never serves stale results), with numbers rounded to 12
-significant digits (:func:`canonical`) so 9e6 and exp(log(9e6)) are the same point. Workers
+rebuilt or edited engine never serves stale results), with every number exactly as the engine
+receives it (:func:`canonical`): 0.1 and exp(log(0.1)) = 0.10000000000000002 give different
+pellets (a DEM run is chaotic), so they are different runs. Workers
 always run with ``threads=1``; the thread count is not part of the key.
 
 Fill, compaction, unloading, demoulding and relaxation depend only on (preset, contact law,
@@ -42,7 +43,7 @@ __all__ = [
     "RunSetup", "run_setup",
 ]
 
-CACHE_FORMAT = 3  # 2: sigma_f / dLf_D at the first failure; 3: after-relax fields honoured
+CACHE_FORMAT = 4  # 2: sigma_f / dLf_D at the first failure; 3: after-relax fields honoured; 4: exact numbers
 
 #: Parameters a scan or fit can vary: name -> (unit, meaning).
 PARAMETERS: Dict[str, Tuple[str, str]] = {
@@ -69,7 +70,8 @@ _AFTER_RELAX_CONTACT = tuple(e.param[len("contact."):] for e in EFFECTS.values()
 
 def canonical(v, where: str = "value"):
     """``v`` as plain JSON values (dataclasses as dicts, keys sorted, tuples as lists), every
-    number a float rounded to 12 significant digits, units unchanged: what a cache key hashes.
+    number a float with its exact value (JSON writes the shortest repr that reads back to the
+    same double), units unchanged: what a cache key hashes.
     ``where`` names the value in the ValueError for a NaN or infinite number (TypeError for a
     type JSON cannot hold)."""
     if dataclasses.is_dataclass(v) and not isinstance(v, type):
@@ -84,7 +86,7 @@ def canonical(v, where: str = "value"):
         f = float(v)
         if not math.isfinite(f):
             raise ValueError(f"{where} = {f!r} must be finite")
-        return float(f"{f:.12g}") + 0.0  # + 0.0: -0.0 -> 0.0
+        return f + 0.0  # + 0.0: -0.0 -> 0.0 (the engine cannot tell them apart)
     if v is None or isinstance(v, str):
         return v
     raise TypeError(f"{where}: cannot key a {type(v).__name__}")
