@@ -196,9 +196,11 @@ def fill(preset: Preset, seed: int = 0, threads: int = 1, n_particles: Optional[
     fill_height = solid / (preset.fill_solid_fraction * math.pi * R * R)
     x, radii = random_pack_cylinder(radii, radius=R - 1e-9, z_lo=0.0, z_hi=fill_height, seed=seed + 1)
     # Room around the mould for the pellet's radial spring-back after demoulding (up to ~30 %
-    # on a tall 10 mm pellet at 120 MPa), its bulge between the plates, and particles it sheds.
+    # on a tall 10 mm pellet at 120 MPa), its bulge between the plates, and particles it sheds;
+    # below the floor too: in the diametral test (floor off) a broken pellet spreads along its
+    # axis both ways, and a short pellet crushed to dL/D = 0.3 sheds particles a millimetre down.
     margin = 1.0 * R + 4.0 * preset.radius_max
-    box = ((-R - margin, -R - margin, -4.0 * preset.radius_max),
+    box = ((-R - margin, -R - margin, -margin),
            (R + margin, R + margin, fill_height + 10.0 * preset.radius_max))
     world = World(dt=preset.dt, box=box, contact=preset.contact, density=preset.density,
                   density_scale=preset.density_scale, gravity=(0.0, 0.0, -9.81), threads=threads,
