@@ -6,7 +6,8 @@ this process, any ``concurrent.futures.Executor``, or a Dask ``distributed.Clien
 ``get_executor(pure=False)`` is used). The process pool starts its workers with 'spawn' (a
 forked OpenMP runtime can hang), so a script that calls :func:`pelletdem.search.scan`,
 :func:`pelletdem.search.fit` or :func:`pelletdem.variants.calibrate_variants` with it must
-keep its work under ``if __name__ == "__main__":``; a worker that dies is replaced, and its
+keep its work under ``if __name__ == "__main__":`` (:func:`check_main_guard` says so before
+any worker starts, rather than letting each worker re-run the script); a worker that dies is replaced, and its
 point retried once on its own. The :class:`Evaluator` serves cached runs, never runs a key
 twice and writes the run cache (:class:`pelletdem.run_cache.RunCache`) itself, so Dask
 workers need no shared file system (``relaxed_dir`` does need one).
@@ -25,7 +26,64 @@ from .run_cache import RunCache
 from .runs import RunSpec, canonical
 from .worker import run_point
 
-__all__ = ["open_executor", "with_relaxed_dir", "Evaluator"]
+__all__ = ["open_executor", "with_relaxed_dir", "Evaluator", "unguarded_main_line", "check_main_guard"]
+
+
+def _is_main_guard(test) -> bool:
+    import ast
+
+    if not (isinstance(test, ast.Compare) and len(test.ops) == 1 and isinstance(test.ops[0], ast.Eq)):
+        return False
+    sides = [test.left, test.comparators[0]]
+    names = [x for x in sides if isinstance(x, ast.Name) and x.id == "__name__"]
+    consts = [x for x in sides if isinstance(x, ast.Constant) and x.value == "__main__"]
+    return len(names) == 1 and len(consts) == 1
+
+
+def unguarded_main_line() -> Optional[int]:
+    """The line of the running script (``__main__``, a file) from which this call came, when
+    that line runs at the script's top level outside ``if __name__ == "__main__":``; None
+    otherwise (called from a function, under the guard, interactively or from a notebook).
+    A spawned worker re-runs such a line on import, and would start workers of its own."""
+    import ast
+    import sys
+
+    main = sys.modules.get("__main__")
+    path = getattr(main, "__file__", None)
+    if not path or not os.path.isfile(path):
+        return None
+    frame = sys._getframe(1)
+    while frame is not None:
+        if frame.f_code.co_name == "<module>" and frame.f_globals.get("__name__") == "__main__":
+            break
+        frame = frame.f_back
+    if frame is None or os.path.abspath(frame.f_code.co_filename) != os.path.abspath(path):
+        return None
+    line = frame.f_lineno
+    try:
+        with open(path, encoding="utf-8") as fh:
+            tree = ast.parse(fh.read(), path)
+    except (OSError, SyntaxError, ValueError):
+        return None
+    for node in tree.body:
+        if isinstance(node, ast.If) and _is_main_guard(node.test) and node.lineno <= line <= (node.end_lineno or line):
+            return None
+    return line
+
+
+def check_main_guard() -> None:
+    """RuntimeError, before any worker starts, when worker processes would be started from a
+    script's top level (see :func:`unguarded_main_line`), saying what to do instead."""
+    import sys
+
+    line = unguarded_main_line()
+    if line is not None:
+        path = sys.modules["__main__"].__file__
+        raise RuntimeError(
+            f"{path}, line {line}: worker processes are started from the script's top level. Each worker "
+            "imports the script again and would run its work (and start workers) again. Put the script's "
+            "work in a function called under `if __name__ == \"__main__\":`, or run without worker "
+            "processes (executor=\"serial\").")
 
 
 class _SerialExecutor(cf.Executor):
@@ -138,6 +196,7 @@ def open_executor(executor, max_workers: Optional[int]):
         n = max_workers or os.cpu_count() or 1
         if not isinstance(n, int) or n < 1:
             raise ValueError(f"max_workers = {max_workers!r} must be an integer >= 1")
+        check_main_guard()
         ex = _RespawningPool(cf.ProcessPoolExecutor(max_workers=n, mp_context=multiprocessing.get_context("spawn")),
                              own=True)
         try:
