@@ -20,7 +20,7 @@ import time
 
 # The arguments that define a run: a checkpoint made with other values is not resumed.
 RUN_ARGS = ("preset", "material", "mc", "sigma_z", "seed", "threads", "particles", "E_b", "sigma_c",
-            "tau_c", "r_b", "max_dld", "break_drop")
+            "tau_c", "r_b", "max_dld", "break_drop", "set")
 
 
 def _bond_law(args):
@@ -40,6 +40,14 @@ def _bond_law(args):
     return law
 
 
+def _with_settings(preset, law, settings):
+    """The preset's contact law and the bond law with ``--set`` values applied."""
+    from .law_settings import apply_settings
+
+    contact, law = apply_settings(preset.contact, law, settings)
+    return preset.with_(contact=contact), law
+
+
 def _variant_or_none(args):
     """The paper's variant for (material, mc, sigma_z), or None where Table 3 has none."""
     from .measured import variant
@@ -54,6 +62,7 @@ def _run(args) -> int:
     from . import pipeline, plots
     from ._version import __version__
     from .checkpoint import RunCheckpoint
+    from .law_settings import parse_settings
 
     t0 = time.perf_counter()
     v = _variant_or_none(args)
@@ -72,6 +81,7 @@ def _run(args) -> int:
     run_args["version"] = __version__
     ck = RunCheckpoint(ck_path, run_args, interval=args.checkpoint_interval)
     preset = pipeline.get_preset(args.preset)
+    preset, law = _with_settings(preset, law, parse_settings(args.set))
     if args.max_dld is not None:
         preset = preset.with_(max_dLD=args.max_dld)
     if args.break_drop is not None:
@@ -88,6 +98,7 @@ def _run(args) -> int:
                     "bond": {"E_b_mpa": law.youngs_modulus / 1e6, "sigma_c_mpa": law.sigma_c / 1e6,
                              "tau_c_mpa": law.tau_c / 1e6, "r_b_um": law.radius * 1e6,
                              "source": "table5" if args.E_b is None else "command line"},
+                    "set": parse_settings(args.set),
                     "measured_sigma_f_mpa": v.sigma_f / 1e6 if v is not None else None,
                     "measured_dLf_D": v.dLf_D if v is not None else None,
                     "total_wall_time_s": round(max(ck.wall_time_s, time.perf_counter() - t0), 3),
@@ -124,6 +135,9 @@ def main(argv=None) -> int:
     r.add_argument("--break-drop", type=float, default=None, metavar="FRACTION",
                    help="end the diametral test earlier, once the plate force has fallen to this fraction "
                         "of its peak (0 <= break_drop < 1; default 0: run to max_dld)")
+    r.add_argument("--set", action="append", default=[], metavar="LAW.NAME=VALUE",
+                   help="set a contact or bond law parameter, e.g. contact.mu=0.4 or bond.softening=1 "
+                        "(SI units; repeatable; checked against the laws' parameter tables)")
     r.add_argument("--seed", type=int, default=0)
     r.add_argument("--threads", type=int, default=min(2, os.cpu_count() or 1))
     r.add_argument("--particles", type=int, default=None, help="override the preset's particle count")
@@ -140,7 +154,7 @@ def main(argv=None) -> int:
     if args.command == "loop":
         try:
             return loop_cli.run(args)
-        except ValueError as e:  # a bad --synthetic or data file, named before any work
+        except (ValueError, RuntimeError) as e:  # a bad argument or data file, named before any work
             print(f"pelletdem loop: error: {e}", file=sys.stderr)
             return 2
     if args.command == "run":
@@ -176,6 +190,13 @@ def main(argv=None) -> int:
             _bond_law(args).to_core()  # a bond law the engine refuses, named before any work
         except ValueError as e:
             ap.error(f"bond parameters: {e}")
+        from .law_settings import parse_settings
+        from .pipeline import get_preset
+
+        try:
+            _with_settings(get_preset(args.preset), _bond_law(args), parse_settings(args.set))
+        except ValueError as e:
+            ap.error(str(e))
         from .checkpoint import CheckpointError
 
         try:

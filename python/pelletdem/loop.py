@@ -5,28 +5,34 @@ model lacks, add the effect, and report the error before and after.
 This module re-exports the public names of the modules the loop is made of:
 
 * :mod:`pelletdem.loop_data`: :class:`Condition`, :class:`Observation`, :class:`Dataset`
-  (from the paper's tables, from measured curves) and :func:`synthetic_dataset` (data made by
-  a simulator with a hidden effect); :data:`QUANTITIES`, :data:`DIAMETRAL_PARTS`,
-  :data:`COMPACTION_SPLIT`.
+  (from the paper's tables, from measured curves, from a data manifest).
+* :mod:`pelletdem.loop_synthetic`: :func:`synthetic_dataset` (data made by a simulator the
+  way a laboratory makes them, with a hidden effect).
 * :mod:`pelletdem.loop_simulators`: :class:`Simulator`, :class:`Prediction`,
-  :class:`EngineSimulator` (the C++ pellet through the calibration's run cache and
-  executors) and :class:`FunctionSimulator` (any Python function).
-* :mod:`pelletdem.loop_fit`: :func:`fit_model` (Levenberg-Marquardt on z-scores, on the
-  least-squares pieces of :mod:`pelletdem.optimize`) and its :class:`FitState`.
-* :mod:`pelletdem.loop_selection`: :func:`close_loop`, the candidates it ranks
-  (:class:`Candidate`) and what it found (:class:`LoopResult`).
+  :class:`Ensemble` (one condition on several packings), :class:`EngineSimulator` (the C++
+  pellet) and :class:`FunctionSimulator` (any Python function).
+* :mod:`pelletdem.loop_emulator`: :class:`Axis`, :class:`Space`, :class:`Emulator` (the
+  Gaussian-process surrogate every fit runs on).
+* :mod:`pelletdem.loop_models`: :func:`fit_model` and the :class:`ModelFit` it returns.
+* :mod:`pelletdem.loop_screen`: the candidates' :class:`Screen` and :class:`Power`.
+* :mod:`pelletdem.loop_selection`: :func:`close_loop` and what it found (:class:`LoopResult`,
+  its :class:`Step` s and :class:`Trial` s).
 
 The report is :func:`pelletdem.loop_report.write_report` (and ``pelletdem loop``).
 """
 from __future__ import annotations
 
-from .loop_data import COMPACTION_SPLIT, DIAMETRAL_PARTS, QUANTITIES, Condition, Dataset, Observation
-from .loop_fit import FitState, fit_model
-from .loop_selection import Candidate, LoopResult, close_loop
-from .loop_simulators import EngineSimulator, FunctionSimulator, Prediction, Simulator, synthetic_dataset
+from .loop_data import COMPACTION_SPLIT, DIAMETRAL_GRID, DIAMETRAL_PARTS, QUANTITIES, Condition, Dataset, Observation
+from .loop_emulator import Axis, Emulator, Space
+from .loop_models import ModelFit, fit_model
+from .loop_screen import Power, Screen
+from .loop_selection import CHECK_SEEDS, FIT_SEEDS, LoopResult, Step, Trial, close_loop
+from .loop_simulators import EngineSimulator, Ensemble, FunctionSimulator, Prediction, Simulator
+from .loop_synthetic import DATA_SEEDS, synthetic_dataset
 
 __all__ = [
-    "Condition", "Observation", "Dataset", "Prediction", "Simulator", "FunctionSimulator",
-    "EngineSimulator", "FitState", "Candidate", "LoopResult", "fit_model", "close_loop",
-    "synthetic_dataset", "QUANTITIES", "DIAMETRAL_PARTS", "COMPACTION_SPLIT",
+    "Condition", "Observation", "Dataset", "Prediction", "Ensemble", "Simulator", "FunctionSimulator",
+    "EngineSimulator", "Axis", "Space", "Emulator", "ModelFit", "fit_model", "Screen", "Power", "Trial", "Step",
+    "LoopResult", "close_loop", "synthetic_dataset", "FIT_SEEDS", "CHECK_SEEDS", "DATA_SEEDS", "QUANTITIES",
+    "DIAMETRAL_PARTS", "DIAMETRAL_GRID", "COMPACTION_SPLIT",
 ]

@@ -9,7 +9,6 @@ curve of which condition). A dataset is built from the paper's tables
 """
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass
 from typing import Callable, Dict, List, Mapping, Optional, Sequence, Tuple
@@ -18,8 +17,8 @@ import numpy as np
 
 from .metrics import DEFAULT_REL_SD_FLOOR
 
-__all__ = ["QUANTITIES", "DIAMETRAL_PARTS", "COMPACTION_SPLIT", "Condition", "Observation", "Dataset",
-           "diametral_part"]
+__all__ = ["QUANTITIES", "DIAMETRAL_PARTS", "DIAMETRAL_GRID", "COMPACTION_SPLIT", "Condition", "Observation",
+           "Dataset", "diametral_part"]
 
 #: Observable quantities: name -> (unit, meaning).
 QUANTITIES: Dict[str, Tuple[str, str]] = {
@@ -31,6 +30,10 @@ QUANTITIES: Dict[str, Tuple[str, str]] = {
 }
 #: Parts of a diametral curve by x / (dL_f/D): toe below 0.4, rise to 0.85, peak to 1.15.
 DIAMETRAL_PARTS = ((0.4, "toe"), (0.85, "rise"), (1.15, "peak"), (math.inf, "post-peak"))
+#: Where a diametral curve is sampled, in fractions of its dL_f/D: from the toe, where sigma_1
+#: is already a quarter of the way up (near dL/D = 0 it is ~1 kPa and its relative error
+#: meaningless), to half again past the failure.
+DIAMETRAL_GRID = (0.25, 0.5, 0.75, 1.0, 1.25, 1.5)
 #: Compaction curves split at this dh/h0 (the paper's model fits only below it).
 COMPACTION_SPLIT = 0.75
 _MPA = 1e6
@@ -91,8 +94,14 @@ class Observation:
 
     @property
     def effective_sd(self) -> float:
-        """The SD used in z-scores: the replicate SD floored at 1% of |value| (same unit)."""
+        """The replicate SD floored at 1% of |value| (same unit): no measurement is better."""
         return max(self.sd, DEFAULT_REL_SD_FLOOR * abs(self.value), 1e-300)
+
+    @property
+    def standard_error(self) -> float:
+        """The standard error of the measured mean, effective_sd / sqrt(n) (same unit): what
+        a model's mean is compared with."""
+        return self.effective_sd / math.sqrt(max(self.n, 1))
 
 
 def diametral_part(x: float, x_f: float) -> str:
@@ -134,17 +143,18 @@ class Dataset:
 
     @property
     def sds(self) -> np.ndarray:
-        """Effective SDs used in z-scores."""
+        """Effective replicate SDs (each quantity's SI unit)."""
         return np.array([o.effective_sd for o in self.observations])
 
-    def with_model_sd(self, model_sd: Sequence[float]) -> "Dataset":
-        """A copy whose SDs also carry the model's own scatter: sd = sqrt(sd^2 + model_sd^2)
-        per observation (same unit)."""
-        model_sd = np.asarray(model_sd, float)
-        if model_sd.shape != (len(self),) or not np.all(np.isfinite(model_sd)) or np.any(model_sd < 0):
-            raise ValueError("model_sd must be one finite value >= 0 per observation")
-        return Dataset([dataclasses.replace(o, sd=float(math.hypot(o.sd, m)))
-                        for o, m in zip(self.observations, model_sd)], self.name)
+    @property
+    def standard_errors(self) -> np.ndarray:
+        """Standard errors of the measured means (each quantity's SI unit)."""
+        return np.array([o.standard_error for o in self.observations])
+
+    @property
+    def dofs(self) -> np.ndarray:
+        """Degrees of freedom of each replicate SD, n - 1 (at least 1)."""
+        return np.array([max(o.n - 1, 1) for o in self.observations], float)
 
     def subset(self, keep: Callable[[Observation], bool], name: Optional[str] = None) -> "Dataset":
         """The observations for which ``keep(observation)`` is true."""
@@ -153,15 +163,14 @@ class Dataset:
             raise ValueError("the subset is empty")
         return Dataset(obs, name or self.name)
 
-    def split(self, held_out: Callable[[Condition], bool]) -> Tuple["Dataset", "Dataset"]:
+    def split(self, held_out: Callable[[Condition], bool]) -> Tuple["Dataset", Optional["Dataset"]]:
         """(fit, held-out): observations of conditions for which ``held_out(condition)`` is
-        false, and true. Both must be non-empty."""
+        false, and true (None when no condition is held out). The fit part must be non-empty."""
         fit = [o for o in self.observations if not held_out(o.condition)]
         held = [o for o in self.observations if held_out(o.condition)]
-        if not fit or not held:
-            raise ValueError(f"the split leaves {len(fit)} fit and {len(held)} held-out observations; "
-                             "both need at least one")
-        return Dataset(fit, self.name + " (fit)"), Dataset(held, self.name + " (held out)")
+        if not fit:
+            raise ValueError("every condition is held out: nothing is left to fit")
+        return Dataset(fit, self.name + " (fit)"), (Dataset(held, self.name + " (held out)") if held else None)
 
     @classmethod
     def from_paper(cls, materials: Optional[Sequence[str]] = None,
@@ -192,12 +201,14 @@ class Dataset:
         return cls(obs, "paper (Tables 2, 3)")
 
     @classmethod
-    def from_curves(cls, curves: Mapping[Condition, object], points: int = 12,
-                    scalars: bool = True, name: str = "curves") -> "Dataset":
+    def from_curves(cls, curves: Mapping[Condition, object], points: int = 8, scalars: bool = True,
+                    name: str = "curves") -> "Dataset":
         """Observations from measured curves (:class:`pelletdem.measured.Curve`, with
-        replicates) per condition: ``points`` points of each mean curve on an even grid of x,
-        with the replicates' SD, labelled by part; for diametral curves also sigma_f and
-        dL_f/D of the replicates (``scalars``)."""
+        replicates) per condition, each with the replicates' SD and count. A diametral curve
+        gives sigma_1 at :data:`DIAMETRAL_GRID` fractions of its mean dL_f/D (those inside the
+        replicates' common range), labelled by part, and (``scalars``) sigma_f and dL_f/D; a
+        compaction curve gives sigma_z at ``points`` values of dh/h0 from 0.3 of its range to its
+        end. The defaults are ``pelletdem loop --data``'s."""
         if not isinstance(points, int) or not 3 <= points <= 500:
             raise ValueError(f"points = {points!r} is out of range: allowed 3 <= points <= 500")
         obs = []
@@ -207,12 +218,18 @@ class Dataset:
             lo, hi = curve.common_range()
             if not lo < hi:
                 raise ValueError(f"{cond.label}: the replicates share no x range")
-            grid = np.linspace(lo + 0.02 * (hi - lo), hi, points)
-            mc = curve.mean_curve(grid)
             nrep = len(curve.replicates)
             if curve.kind == "diametral":
                 pk = curve.peak()
                 x_f = pk.dLf_D_mean
+                if x_f >= hi - 0.02 * (hi - lo):
+                    raise ValueError(f"{cond.label}: the diametral curves reach their maximum at the end of the test "
+                                     f"(dL/D = {hi:.3g}): they show no failure, no peak to sample around")
+                grid = np.array([f * x_f for f in DIAMETRAL_GRID if lo <= f * x_f <= hi])
+                if len(grid) < 2:
+                    raise ValueError(f"{cond.label}: the replicates' common range [{lo:.3g}, {hi:.3g}] holds fewer "
+                                     f"than 2 of the points {DIAMETRAL_GRID} x dL_f/D = {x_f:.3g}")
+                mc = curve.mean_curve(grid)
                 for x, m, s in zip(mc.x, mc.mean, mc.sd):
                     obs.append(Observation(cond, "sigma_1", float(x), float(m), float(np.nan_to_num(s)), nrep,
                                            diametral_part(x, x_f)))
@@ -222,6 +239,8 @@ class Dataset:
                     obs.append(Observation(cond, "dLf_D", float("nan"), pk.dLf_D_mean,
                                            float(np.nan_to_num(pk.dLf_D_sd)), nrep))
             else:
+                grid = np.linspace(lo + 0.3 * (hi - lo), hi, points)
+                mc = curve.mean_curve(grid)
                 split = COMPACTION_SPLIT if hi > COMPACTION_SPLIT else float(np.quantile(grid, 0.75))
                 for x, m, s in zip(mc.x, mc.mean, mc.sd):
                     obs.append(Observation(cond, "sigma_z", float(x), float(m), float(np.nan_to_num(s)), nrep,

@@ -1,136 +1,170 @@
-"""Fitting a simulator's parameters to a dataset: :func:`fit_model`.
+"""Fitting a model to measured data on its emulator (:mod:`pelletdem.loop_emulator`).
 
-Levenberg-Marquardt on the z-scores of the observations (:func:`zscores`: prediction minus
-measured value, over the effective SD), in log space for positive parameters, with
-forward-difference Jacobians whose columns are predicted together
-(:meth:`pelletdem.loop_simulators.Simulator.predict_many`). The steps and finite
-differences are :mod:`pelletdem.optimize`'s, shared with the calibration's fit.
+The misfit of observation i at parameters u (a position in the model's box) starts from
+
+    t_i(u) = (mu_i(u) - y_i) / sqrt(s_i^2 + m_i^2 + v_i(u))
+
+with y_i the measured mean and s_i its standard error (replicate SD / sqrt(n)), mu_i and v_i
+the emulated ensemble mean and its variance, and m_i the standard error of the model's own
+ensemble mean over its packings (the pellet's scatter between packings, which a mean over k of
+them keeps at SD / sqrt(k)). An SD from five replicates is itself uncertain (a fifth of such
+estimates fall below 0.6 of the true SD), so t_i is a Welch t statistic, not a normal score:
+with the Welch-Satterthwaite degrees of freedom it is turned into the normal score z_i of the
+same tail probability (:func:`welch_z`), and chi2 = sum z_i^2 behaves as a chi-square under
+noise. chi2 = sum z_i^2 is minimised by scipy.optimize.least_squares
+(trust region, bounded to the box) from several starts: the given one and the design points
+that fit best. The parameters' standard errors come from the Jacobian at the optimum,
+(J^T J)^-1 in the box's units, turned into relative errors on log axes.
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
-from typing import Callable, Dict, List, Mapping, Optional, Sequence
+from dataclasses import dataclass, field
+from typing import Dict, List, Optional, Sequence
 
 import numpy as np
 
 from .loop_data import Dataset
-from .loop_simulators import Simulator
-from .optimize import bounded_parameters, chi_square, fd_jacobian, fd_points, marquardt_step
+from .loop_emulator import Emulator
 
-__all__ = ["FitState", "zscores", "zscores_many", "fit_model"]
+__all__ = ["EmulatedFit", "welch_z", "misfit", "fit_emulated", "profile"]
+
+#: Degrees of freedom of an SD pooled over a whole design (many packings at many points).
+POOLED_DOF = 1e3
 
 
 @dataclass
-class FitState:
-    """A fitted model: ``params`` (all, SI), ``free`` (names fitted), ``z`` (z-scores of the
-    fit observations), ``chi2``, ``jacobian`` (dz/du, u = ln p for positive parameters),
-    ``iterations``, ``n_evaluations`` (parameter points tried)."""
+class EmulatedFit:
+    """A model fitted on its emulator: ``params`` (every simulator parameter, SI), ``u`` (the
+    fitted position in the box), ``z`` (misfits of the observations, -), ``chi2``, ``se``
+    (standard error of each fitted parameter: relative, i.e. of ln(value), on log axes and in
+    the parameter's unit on linear ones), ``cov`` (covariance in the box's units) and the
+    number of observations ``n``."""
 
     params: Dict[str, float]
-    free: List[str]
+    u: np.ndarray
     z: np.ndarray
     chi2: float
-    jacobian: np.ndarray
-    iterations: int
-    n_evaluations: int
+    se: Dict[str, float]
+    cov: np.ndarray
+    n: int
+
+    @property
+    def chi2_per_point(self) -> float:
+        """chi2 / n."""
+        return self.chi2 / max(self.n, 1)
+
+    relative: Dict[str, bool] = field(default_factory=dict)
+    profiles: Dict[str, tuple] = field(default_factory=dict)
+
+    def interval(self, name: str, k: float = 2.0) -> tuple:
+        """(low, high) of parameter ``name`` (SI): where its profile's chi2 stays within k^2
+        of the minimum when it was profiled (:func:`profile`), else +-k standard errors."""
+        if name in self.profiles:
+            values, chi2 = self.profiles[name]
+            inside = values[chi2 <= float(np.min(chi2)) + k * k]
+            return (float(inside.min()), float(inside.max()))
+        v, s = self.params[name], self.se.get(name, float("nan"))
+        if not math.isfinite(s):
+            return (float("nan"), float("nan"))
+        if self.relative.get(name, True):
+            return (v * math.exp(-k * s), v * math.exp(k * s))
+        return (v - k * s, v + k * s)
 
 
-def zscores_many(sim: Simulator, params_list: Sequence[Mapping[str, float]], data: Dataset) -> List[np.ndarray]:
-    """z-scores (-) of ``data`` under each parameter set (SI), predicted together: (predicted -
-    measured) / effective SD per observation, NaN where a prediction could not be made."""
-    out = []
-    for preds in sim.predict_many(list(params_list), data.conditions):
-        pred = np.array([preds[o.condition].value(o) for o in data.observations])
-        z = (pred - data.values) / data.sds
-        out.append(np.where(np.isfinite(z), z, np.nan))
-    return out
+def welch_z(diff, se_a, dof_a, se_b, dof_b) -> np.ndarray:
+    """Normal scores (-) of differences ``diff`` between two means whose standard errors
+    ``se_a``, ``se_b`` (diff's unit) were estimated with ``dof_a``, ``dof_b`` degrees of
+    freedom: the Welch t statistic diff / sqrt(se_a^2 + se_b^2) mapped to the normal score of
+    the same two-sided tail probability under Student's t with the Welch-Satterthwaite
+    degrees of freedom. Arrays broadcast."""
+    from scipy import stats
+
+    diff = np.asarray(diff, float)
+    a, b = np.asarray(se_a, float) ** 2, np.asarray(se_b, float) ** 2
+    t = diff / np.sqrt(a + b)
+    dof = (a + b) ** 2 / (a * a / np.maximum(dof_a, 1.0) + b * b / np.maximum(dof_b, 1.0) + 1e-300)
+    dof = np.clip(dof, 1.0, 1e6)
+    # the upper tail, computed where it is accurate, then its normal score
+    p = stats.t.sf(np.abs(t), dof)
+    return np.sign(t) * stats.norm.isf(np.maximum(p, 1e-300))
 
 
-def zscores(sim: Simulator, params: Mapping[str, float], data: Dataset) -> np.ndarray:
-    """z-scores (-) of ``data`` under ``params`` (SI); see :func:`zscores_many`."""
-    return zscores_many(sim, [params], data)[0]
+def misfit(emulator: Emulator, data: Dataset, u: np.ndarray) -> np.ndarray:
+    """z_i(u) of every observation of ``data`` (in the emulator's output order) at unit
+    position ``u`` (-)."""
+    mean, var = emulator.predict(np.asarray(u, float)[None, :])
+    model_se = np.sqrt(emulator.noise() ** 2 + var[0])
+    return welch_z(mean[0] - data.values, data.standard_errors, data.dofs, model_se, POOLED_DOF)
 
 
-def fit_model(sim: Simulator, data: Dataset, bounds: Mapping[str, Sequence[float]],
-              start: Mapping[str, float], fixed: Optional[Mapping[str, float]] = None, *,
-              max_iter: int = 4, tol: float = 0.01, fd_step: float = 0.1,
-              log: Optional[Callable[[str], None]] = None) -> FitState:
-    """Levenberg-Marquardt fit of the parameters in ``bounds`` ((lo, hi), SI; positive
-    bounds are fitted in log space) to ``data``, from ``start``, with ``fixed`` parameters
-    held. Forward-difference Jacobians (step ``fd_step`` in ln p for positive parameters:
-    10% by default, wide enough to see through a DEM pellet's run-to-run jitter). Stops after
-    ``max_iter`` iterations or when chi-square improves by less than ``tol`` (relative), or
-    when 8 ever more damped steps (damping x5 each) all fail to lower it.
-    """
-    pars = bounded_parameters(bounds)
-    fixed = dict(fixed or {})
-    for p in pars:
-        if p.name not in start:
-            raise ValueError(f"start has no value for {p.name!r}")
-        v = float(start[p.name])
-        if not p.lo <= v <= p.hi:
-            raise ValueError(f"start {p.name} = {v} is outside its bounds [{p.lo}, {p.hi}]")
-    if not isinstance(max_iter, int) or max_iter < 0:
-        raise ValueError(f"max_iter = {max_iter!r} must be an integer >= 0")
-    if not (isinstance(fd_step, (int, float)) and 1e-6 <= fd_step <= 1):
-        raise ValueError(f"fd_step = {fd_step!r} is out of range: allowed 1e-6 <= fd_step <= 1")
-    say = log or (lambda s: None)
-    u = np.array([p.to_u(float(start[p.name])) for p in pars])
-    n_eval = 0
+def fit_emulated(emulator: Emulator, data: Dataset, start: Optional[Sequence[float]] = None,
+                 starts: int = 3) -> EmulatedFit:
+    """Minimise chi2 of ``data`` over ``emulator``'s box (see the module docstring), from
+    ``start`` (unit position; default the box's centre) and the ``starts`` best design points.
+    The data's observations must be the emulator's outputs, in order."""
+    from scipy.optimize import least_squares
 
-    def params_of(uu):
-        d = dict(fixed)
-        d.update({p.name: p.to_v(x) for p, x in zip(pars, uu)})
-        return d
+    d = emulator.space.dim
+    if len(data) != emulator.n_outputs:
+        raise ValueError(f"{len(data)} observations for an emulator of {emulator.n_outputs} outputs")
+    x0s: List[np.ndarray] = [np.clip(np.asarray(start, float), 0.0, 1.0) if start is not None else np.full(d, 0.5)]
+    # the design points that fit the data best, as seen through the emulator's own mean there
+    z_design = [float(np.sum(misfit(emulator, data, u) ** 2)) for u in emulator.U]
+    for k in np.argsort(z_design)[:starts]:
+        x0s.append(emulator.U[k])
+    best = None
+    for x0 in x0s:
+        res = least_squares(lambda u: misfit(emulator, data, u), x0, bounds=(np.zeros(d), np.ones(d)),
+                            method="trf", x_scale=0.1, diff_step=1e-4, max_nfev=200)
+        if best is None or res.cost < best.cost:
+            best = res
+    u = best.x
+    z = misfit(emulator, data, u)
+    J = best.jac
+    try:
+        cov = np.linalg.pinv(J.T @ J)
+    except np.linalg.LinAlgError:
+        cov = np.full((d, d), np.nan)
+    se, relative = {}, {}
+    for k, a in enumerate(emulator.space.axes):
+        s = math.sqrt(max(cov[k, k], 0.0)) if np.isfinite(cov[k, k]) else float("nan")
+        se[a.name] = s * a.relative_scale()
+        relative[a.name] = a.log
+    return EmulatedFit(emulator.space.params(u), u, z, float(np.sum(z ** 2)), se, cov, len(z), relative)
 
-    def evaluate(uu):
-        nonlocal n_eval
-        n_eval += 1
-        return zscores(sim, params_of(uu), data)
 
-    def jac(uu, z0):
-        nonlocal n_eval
-        shifted = fd_points(uu, pars, fd_step)
-        n_eval += len(shifted)
-        return fd_jacobian(uu, shifted, z0, zscores_many(sim, [params_of(d) for d in shifted], data))
+def profile(emulator: Emulator, data: Dataset, fit: EmulatedFit, name: str, n: int = 41) -> EmulatedFit:
+    """The chi2 profile of parameter ``name``: at ``n`` positions along its axis, chi2
+    minimised over the other parameters (on the emulator, from the fitted position). Stored
+    in ``fit.profiles[name]`` as (values SI, chi2), where :meth:`EmulatedFit.interval` reads
+    it: a weakly constrained strength gets the lopsided interval its data allow rather than a
+    symmetric standard error. Returns ``fit``."""
+    from scipy.optimize import least_squares
 
-    z = evaluate(u)
-    chi = chi_square(z)
-    if not math.isfinite(chi):
-        raise RuntimeError("the start point's simulations failed; choose another start")
-    J = jac(u, z) if pars else np.zeros((len(z), 0))
-    lam = 1e-2
-    it = 0
-    for it in range(1, max_iter + 1):
-        if not pars:
-            break
-        g = J.T @ z
-        A = J.T @ J
-        improved = False
-        # Up to 8 tries, the damping x5 each (to ~4e3 x its value): a pellet's response is far
-        # from linear, and the first Gauss-Newton steps from a poor start can overshoot by a
-        # factor of several (seen on the paper's data: three tries, all worse, stopped the fit
-        # where it started).
-        for _ in range(8):
-            step = marquardt_step(A, g, lam)
-            step = np.clip(step, -1.0, 1.0) if all(p.log for p in pars) else step
-            un = np.array([p.clip_u(x) for p, x in zip(pars, u + step)])
-            if np.allclose(un, u):
-                break
-            zn = evaluate(un)
-            cn = chi_square(zn)
-            say(f"    try (damping {lam:.3g}): chi2 = {cn:.2f}")
-            if cn < chi:
-                improved = True
-                rel = (chi - cn) / max(chi, 1e-300)
-                u, z, chi = un, zn, cn
-                lam = max(lam / 3, 1e-4)
-                break
-            lam *= 5
-        say(f"  iteration {it}: chi2 = {chi:.2f} " + ", ".join(f"{p.name} = {p.to_v(x):.4g}" for p, x in zip(pars, u)))
-        if not improved or rel < tol:
-            break
-        J = jac(u, z)
-    return FitState(params_of(u), [p.name for p in pars], z, chi, J, it, n_eval)
+    names = emulator.space.names
+    k = names.index(name)
+    d = emulator.space.dim
+    others = [j for j in range(d) if j != k]
+    grid = np.linspace(0.0, 1.0, n)
+    chi2 = np.empty(n)
+    order = np.argsort(np.abs(grid - fit.u[k]))  # outwards from the fit, each start the nearest done
+    done: Dict[int, np.ndarray] = {}
+    for i in order:
+        near = min(done, key=lambda j: abs(grid[j] - grid[i])) if done else None
+        x0 = done[near] if near is not None else fit.u[others]
 
+        def z(v, i=i):
+            u = np.empty(d)
+            u[k], u[others] = grid[i], v
+            return misfit(emulator, data, u)
+
+        if others:
+            res = least_squares(z, x0, bounds=(np.zeros(len(others)), np.ones(len(others))), method="trf",
+                                x_scale=0.1, diff_step=1e-4, max_nfev=60)
+            done[i], chi2[i] = res.x, float(np.sum(res.fun ** 2))
+        else:
+            done[i], chi2[i] = x0, float(np.sum(z(x0) ** 2))
+    axis = emulator.space.axes[k]
+    fit.profiles[name] = (np.array([axis.from_unit(g) for g in grid]), chi2)
+    return fit

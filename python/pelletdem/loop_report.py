@@ -1,20 +1,25 @@
 """The discrepancy loop's report: one Markdown file with PNG figures, written by one call.
 
-It shows the error before and after on fitted and held-out data, the residuals before and
-after (per point along each curve, and per part of the curve), the ranking of the candidate
-effects, and why the chosen effect won (or why none was added).
+It shows the verdict, the error before and after on fitted and held-out data (on packings the
+fits never used), every step of the forward selection (the model's fitted parameters with
+their uncertainty, its residual, the candidates' screening, the ones fitted in full and why
+each was or was not added), what the data could have revealed of each candidate (detection
+power), and figures of the measured and simulated numbers and of the residuals.
 """
 from __future__ import annotations
 
+import math
 import os
 from typing import Dict, List
 
 import numpy as np
 
-from .loop_data import QUANTITIES
+from .loop_data import QUANTITIES, Dataset
+from .loop_models import ModelFit
+from .loop_screen import screens_table
 from .loop_selection import LoopResult
 
-__all__ = ["write_report"]
+__all__ = ["write_report", "summary"]
 
 
 def _plt():
@@ -33,33 +38,32 @@ def _save(plt, fig, path: str) -> str:
     return path
 
 
-def _predictions(data, z) -> np.ndarray:
-    return data.values + np.asarray(z) * data.sds
+def _means(mf: ModelFit, data: Dataset) -> np.ndarray:
+    """The model's predictions of ``data`` on the check seeds (each observation's unit)."""
+    return np.array([mf.check[o.condition].mean_se(o)[0] for o in data.observations])
 
 
-def _curves(data) -> Dict[str, List[int]]:
+def _groups(data: Dataset) -> Dict[str, List[int]]:
     out: Dict[str, List[int]] = {}
     for i, o in enumerate(data.observations):
-        # scalars of one quantity share a panel, one tick per condition
-        key = o.curve or o.quantity
-        out.setdefault(key, []).append(i)
+        out.setdefault(o.curve or o.quantity, []).append(i)  # scalars of a quantity share a panel
     return out
 
 
 def _fig_fit(res: LoopResult, path: str) -> str:
-    """Measured points (with SD bars) and both models' predictions, one panel per curve or
-    scalar group, fit and held-out conditions."""
+    """Measured means (standard-error bars) and the baseline's and final model's predictions
+    on fresh packings, one panel per curve or scalar, fit and held-out conditions."""
     plt = _plt()
     panels = []
-    for data, zb, za, tag in ((res.fit_data, res.baseline.z, res.final.z, "fit"),
-                              (res.heldout_data, res.heldout_before, res.heldout_after, "held out")):
-        pb, pa = _predictions(data, zb), _predictions(data, za)
-        for name, idx in _curves(data).items():
+    for data, tag in ((res.fit_data, "fit"), (res.heldout_data, "held out")):
+        if data is None:
+            continue
+        pb, pa = _means(res.baseline, data), _means(res.final, data)
+        for name, idx in _groups(data).items():
             panels.append((f"{name} ({tag})", data, idx, pb, pa))
-    n = len(panels)
-    cols = min(3, n)
-    rows = (n + cols - 1) // cols
-    fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 3.6 * rows), squeeze=False)
+    cols = min(3, len(panels))
+    rows = (len(panels) + cols - 1) // cols
+    fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 3.4 * rows), squeeze=False)
     for ax, (title, data, idx, pb, pa) in zip(axes.flat, panels):
         obs = [data.observations[i] for i in idx]
         q = obs[0].quantity
@@ -67,67 +71,92 @@ def _fig_fit(res: LoopResult, path: str) -> str:
         scale = 1e-6 if unit == "Pa" else 1.0
         if obs[0].curve:
             order = np.argsort([o.x for o in obs])
-            idx = [idx[k] for k in order]
-            obs = [obs[k] for k in order]
-            x = np.array([o.x for o in obs])
-            xl = "dL/D" if q == "sigma_1" else "dh/h0"
-            style = "-"
+            idx, obs = [idx[k] for k in order], [obs[k] for k in order]
+            x, style = np.array([o.x for o in obs]), "-"
+            ax.set_xlabel("dL/D" if q == "sigma_1" else "dh/h0")
         else:
-            x = np.arange(len(obs), dtype=float)
-            xl = ""
-            ax.set_xticks(x, [o.condition.label for o in obs], rotation=60, ha="right", fontsize=6)
-            style = "s"  # one value per condition: markers, not a line between conditions
-        ax.errorbar(x, [o.value * scale for o in obs], yerr=[o.effective_sd * scale for o in obs], fmt="o",
+            x, style = np.arange(len(obs), dtype=float), "s"
+            ax.set_xticks(x, [o.condition.label for o in obs], rotation=45, ha="right", fontsize=6)
+        ax.errorbar(x, [o.value * scale for o in obs], yerr=[o.standard_error * scale for o in obs], fmt="o",
                     ms=3, color="k", label="measured")
         ax.plot(x, pb[idx] * scale, style, ms=4, mfc="none", color="tab:red", label="baseline")
-        if res.chosen is not None:
+        if res.chosen:
             ax.plot(x, pa[idx] * scale, style.replace("s", "^"), ms=4, mfc="none", color="tab:blue",
-                    label=f"+ {res.chosen}")
+                    label=res.final.name)
         ax.set_title(title, fontsize=8)
-        ax.set_xlabel(xl)
         ax.set_ylabel(f"{q} [{'MPa' if unit == 'Pa' else unit}]")
-    for ax in list(axes.flat)[n:]:
+    for ax in list(axes.flat)[len(panels):]:
         ax.axis("off")
     axes.flat[0].legend(fontsize=7)
     return _save(plt, fig, path)
 
 
 def _fig_residual(res: LoopResult, path: str) -> str:
-    """z-scores per point along the fit data, before and after, and per part of the curve."""
+    """z-scores of every observation on fresh packings, baseline and final model."""
     plt = _plt()
-    fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 3.6), gridspec_kw={"width_ratios": [2, 1]})
-    k = np.arange(len(res.baseline.z))
-    a1.axhspan(-2, 2, color="0.9")
-    a1.plot(k, res.baseline.z, "o-", ms=3, color="tab:red", label="baseline")
-    if res.chosen is not None:
-        a1.plot(k, res.final.z, "o-", ms=3, color="tab:blue", label=f"+ {res.chosen}")
-    a1.axhline(0, color="k", lw=0.5)
-    a1.set_xlabel("fit observation (curves in order of x)")
-    a1.set_ylabel("z = (sim - measured) / SD")
-    a1.legend(fontsize=8)
-    parts = list(res.residual_before.by_part)
-    x = np.arange(len(parts))
-    a2.bar(x - 0.2, [res.residual_before.by_part[p][1] for p in parts], 0.4, color="tab:red", label="baseline")
-    if res.chosen is not None:
-        a2.bar(x + 0.2, [res.residual_after.by_part.get(p, (0, 0.0, 0))[1] for p in parts], 0.4, color="tab:blue",
-               label=f"+ {res.chosen}")
-    a2.axhline(0, color="k", lw=0.5)
-    a2.set_xticks(x, parts, rotation=30, fontsize=7)
-    a2.set_ylabel("mean z per part")
+    fig, ax = plt.subplots(figsize=(10, 3.4))
+    zb = [res.baseline.z_check_fit] + ([res.baseline.z_check_held] if res.heldout_data is not None else [])
+    za = [res.final.z_check_fit] + ([res.final.z_check_held] if res.heldout_data is not None else [])
+    zb, za = np.concatenate(zb), np.concatenate(za)
+    k = np.arange(len(zb))
+    ax.axhspan(-2, 2, color="0.9")
+    ax.plot(k, zb, "o-", ms=3, color="tab:red", label="baseline")
+    if res.chosen:
+        ax.plot(k, za, "^-", ms=3, color="tab:blue", label=res.final.name)
+    ax.axvline(len(res.fit_data) - 0.5, color="0.5", ls="--", lw=0.8)
+    ax.axhline(0, color="k", lw=0.5)
+    ax.set_xlabel("observation (fit data, then held out)")
+    ax.set_ylabel("z on fresh packings")
+    ax.legend(fontsize=8)
     return _save(plt, fig, path)
 
 
-def _fig_ranking(res: LoopResult, path: str) -> str:
-    """Fraction of the structured residual each candidate's signature explains."""
+def _fig_screen(res: LoopResult, path: str) -> str:
+    """First-order chi2 gain of each candidate in the first round, and the threshold."""
     plt = _plt()
-    fig, ax = plt.subplots(figsize=(6, 0.45 * max(len(res.candidates), 2) + 1))
-    names = [c.effect.name for c in res.candidates][::-1]
-    vals = [c.explained for c in res.candidates][::-1]
-    colors = ["tab:blue" if n == res.chosen else "0.6" for n in names]
-    ax.barh(names, vals, color=colors)
-    ax.set_xlim(0, 1)
-    ax.set_xlabel("fraction of the structured residual explained (first order)")
+    step = res.steps[0]
+    sc = [s for s in step.screens if not s.skipped][::-1]
+    fig, ax = plt.subplots(figsize=(6, 0.45 * max(len(sc), 2) + 1))
+    ax.barh([s.effect.name for s in sc], [max(s.gain, 1e-3) for s in sc],
+            color=["tab:blue" if s.effect.name in res.chosen else "0.6" for s in sc])
+    if math.isfinite(step.threshold):
+        ax.axvline(step.threshold, color="k", ls="--", lw=0.8, label="fit test threshold")
+        ax.legend(fontsize=7)
+    ax.set_xscale("log")
+    ax.set_xlabel("first-order chi2 gain on the baseline's residual")
     return _save(plt, fig, path)
+
+
+def _params(mf: ModelFit) -> str:
+    out = []
+    for name in mf.space.names:
+        v, se = mf.fit.params[name], mf.fit.se.get(name, math.nan)
+        rel = mf.fit.relative.get(name, True)
+        unc = f" (+-{100 * se:.0f} %)" if rel and math.isfinite(se) else (f" +- {se:.3g}" if math.isfinite(se) else "")
+        out.append(f"{name} = {v:.4g}{unc}")
+    return ", ".join(out)
+
+
+def summary(res: LoopResult) -> dict:
+    """The loop's outcome as plain data (for loop.json): verdict, chosen effects, errors,
+    fitted parameters with standard errors, the steps' screening and trials, the power."""
+    def model(mf: ModelFit) -> dict:
+        return {"name": mf.name, "params": {k: mf.fit.params[k] for k in mf.space.names},
+                "se": {k: mf.fit.se.get(k) for k in mf.space.names}, "emulated_chi2": mf.fit.chi2,
+                "design_points": int(len(mf.emulator.U))}
+
+    return {"verdict": res.verdict, "chosen": list(res.chosen), "errors": res.errors,
+            "baseline": model(res.baseline), "final": model(res.final),
+            "steps": [{"model": st.model.name, "structured": st.residual.structured, "threshold": st.threshold,
+                       "screens": [{"effect": s.effect.name, "gain": s.gain, "strength": s.strength,
+                                    "skipped": s.skipped} for s in st.screens],
+                       "trials": [{"effect": t.effect.name, "accepted": t.accepted, "why": t.why,
+                                   "delta_chi2": t.delta_chi2, "check_before": t.check_before,
+                                   "check_after": t.check_after, "model": model(t.model)} for t in st.trials],
+                       "added": st.added} for st in res.steps],
+            "power": {k: {"detectable": p.detectable, "replicates": p.replicates, "packings": p.packings,
+                          "statement": p.statement} for k, p in res.power.items()},
+            "n_simulations": res.n_simulations, "wall_time_s": res.wall_time_s}
 
 
 def write_report(res: LoopResult, out_dir: str, title: str = "Discrepancy loop") -> str:
@@ -136,37 +165,35 @@ def write_report(res: LoopResult, out_dir: str, title: str = "Discrepancy loop")
     os.makedirs(out_dir, exist_ok=True)
     figs = {"fit": _fig_fit(res, os.path.join(out_dir, "loop_fit.png")),
             "residual": _fig_residual(res, os.path.join(out_dir, "loop_residual.png"))}
-    if res.candidates:
-        figs["ranking"] = _fig_ranking(res, os.path.join(out_dir, "loop_ranking.png"))
+    if res.steps and res.steps[0].screens:
+        figs["screen"] = _fig_screen(res, os.path.join(out_dir, "loop_screen.png"))
+    held = res.heldout_data
     L = [f"# {title}", "", f"**Verdict: {res.verdict}.**", "",
-         f"Fit data: {len(res.fit_data)} points of {len(res.fit_data.conditions)} conditions "
-         f"({', '.join(c.label for c in res.fit_data.conditions)}); held out: {len(res.heldout_data)} points of "
-         f"{', '.join(c.label for c in res.heldout_data.conditions)}. {res.n_simulations} simulations, "
-         f"{res.wall_time_s:.0f} s.", "", "## Error before and after", "", res.table(), "",
-         "chi2/n: mean squared z-score (z = (sim - measured) / replicate SD); RRMSE: eq. 16 over all points.",
-         "", "## Baseline fit", "",
-         ", ".join(f"{k} = {v:.4g}" for k, v in res.baseline.params.items()), "", "## Residual of the baseline", ""]
-    L += ["    " + s for s in res.residual_before.lines()]
-    L += ["", f"![residuals]({os.path.basename(figs['residual'])})", "", "## Candidate effects", ""]
-    if res.candidates:
-        L += ["| effect | law parameter | explained | refit held-out chi2/n | BIC | outcome |",
-              "|---|---|---|---|---|---|"]
-        nh = len(res.heldout_data)
-        for c in res.candidates:
-            held = f"{c.heldout_chi2 / nh:.2f}" if np.isfinite(c.heldout_chi2) else "-"
-            bic = f"{c.bic:.1f}" if np.isfinite(c.bic) else "-"
-            out = "**chosen**" if c.effect.name == res.chosen else (c.why or "not refitted")
-            L.append(f"| {c.effect.name} | `{c.effect.param}` | {c.explained:.2f} | {held} | {bic} | {out} |")
-        L += ["", f"![ranking]({os.path.basename(figs['ranking'])})", "", "Signatures (what each effect does to "
-              "the residual when the model lacks it):", ""]
-        L += [f"- **{c.effect.name}**: {c.effect.description}. {c.effect.signature}." for c in res.candidates]
-    else:
-        L.append("None traced: the residual is consistent with the replicate scatter.")
-    if res.chosen is not None:
-        L += ["", "## Residual after adding the effect", ""]
-        L += ["    " + s for s in res.residual_after.lines()]
-        L += ["", "Fitted: " + ", ".join(f"{k} = {v:.4g}" for k, v in res.final.params.items())]
-    L += ["", "## Measured and simulated", "", f"![fit]({os.path.basename(figs['fit'])})", "", "## Log", "", "```"]
+         f"Fit data: {len(res.fit_data)} numbers of {', '.join(c.label for c in res.fit_data.conditions)}; "
+         + (f"held out: {len(held)} numbers of {', '.join(c.label for c in held.conditions)}. " if held is not None
+            else "nothing held out. ")
+         + f"{res.n_simulations} simulations, {res.wall_time_s:.0f} s.", "",
+         "## Error before and after", "", res.table(), "",
+         "On packings no fit or design used. chi2/n: mean squared z-score, z the normal score of the "
+         "difference between the model's mean over its packings and the measured mean, over both standard "
+         "errors; about 1 when the model is right. RRMSE: eq. 16.", ""]
+    for k, st in enumerate(res.steps):
+        L += [f"## Step {k + 1}: {st.model.name}", "", f"Fitted (emulated chi2 {st.model.fit.chi2:.1f} on "
+              f"{st.model.fit.n} numbers, {len(st.model.emulator.U)} design points): {_params(st.model)}.", "",
+              "Residual:", ""]
+        L += ["    " + s for s in st.residual.lines()]
+        if st.screens:
+            L += ["", f"Screening (fit test threshold {st.threshold:.1f}):", "", screens_table(st.screens, res.power)]
+        for t in st.trials:
+            L += ["", f"- **{t.effect.name}** {'added' if t.accepted else 'not added'}: {t.why}. Fitted: "
+                  f"{_params(t.model)}."]
+        L.append("")
+    if "screen" in figs:
+        L += [f"![screening]({os.path.basename(figs['screen'])})", ""]
+    L += ["## What these data could reveal", ""]
+    L += [f"- {p.statement}" for p in res.power.values()] or ["- (no candidate was screened)"]
+    L += ["", "## Measured and simulated", "", f"![fit]({os.path.basename(figs['fit'])})", "",
+          f"![residuals]({os.path.basename(figs['residual'])})", "", "## Log", "", "```"]
     L += res.log + ["```", ""]
     path = os.path.join(out_dir, "report.md")
     with open(path, "w") as fh:

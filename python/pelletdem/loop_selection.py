@@ -1,45 +1,38 @@
-"""Closing the loop with measured data: fit, find the residual, trace it to an effect the
-model lacks, add the effect, and report the error before and after.
+"""Closing the loop with measured data: fit, find the residual, trace it to an effect the model
+lacks, add the effect, and report the error before and after (:func:`close_loop`).
 
-The procedure (:func:`close_loop`):
+The pellet is a stochastic simulator: every prediction is a mean over packings with its
+standard error, and every model is fitted on its emulator (:mod:`pelletdem.loop_models`). The
+procedure is forward selection:
 
-1. **Baseline fit.** The paper's model with the chosen base parameters (e.g. E_b and
-   sigma_c, per material or shared) is fitted to the *fit* observations by Levenberg-Marquardt
-   on z-scores, in log space, with forward-difference Jacobians (every simulation goes through
-   the calibration cache, so repeated points cost nothing).
-2. **Residual.** The model's own scatter is measured first (``model_jitter``: the base
-   parameters raised and lowered by 0.1%; a DEM pellet then breaks its bonds in another order)
-   and added to the replicate SDs in quadrature, so that a chaotic model's jitter is not taken
-   for a missing effect. :func:`pelletdem.residuals.describe`: per point, per part of the curve (toe,
-   rise, peak, post-peak; compaction below and above dh/h0 = 0.75), per condition, and tests
-   for structure (chi-square against the replicate SD, runs along the curves, trends with
-   pressure and moisture). A residual consistent with noise ends the loop: nothing is added.
-3. **Trace.** Each candidate of :data:`pelletdem.effects.EFFECTS` is switched on at its probe
-   strength on top of the fitted baseline (one simulation per condition): the change of the
-   predictions, in z units, is its *measured signature*. The part of the residual that
-   re-fitting the base parameters cannot remove (orthogonal to the baseline Jacobian) is
-   projected on the part of each signature that the base parameters cannot mimic; the
-   squared cosine of that angle is the fraction of the structured residual the effect can
-   explain to first order. An effect whose best strength would be negative while it only
-   works one way explains nothing. Candidates are ranked by that fraction (to two digits);
-   among equals, effects of the diametral test come before compaction effects, since they
-   branch off the cached relaxed pellets and cost a fraction of a refit that needs new ones.
-4. **Refit and choose.** The best ``refit_top`` candidates (explaining at least
-   ``min_explained``) are refitted with their parameter free, starting from the best point of
-   a profile over the effect's strength (``profile_points`` values across its bounds, each
-   with the base parameters moved by one Gauss-Newton step). Each is scored on the
-   *held-out* observations (other pressures, moisture contents or replicates, never used in
-   a fit) and on the fit data with a penalty of ln(n) per added parameter (BIC). A candidate
-   is accepted when its penalised fit error falls, its held-out chi-square falls by at least
-   ``min_heldout_gain`` (default 30%), and the refitted residual is no longer structured. If
-   none is accepted the loop says "no candidate explains this residual"; if two are accepted
-   and the runner-up's held-out error is within ``clear_margin`` of the best's, the loop says
-   no candidate wins clearly and adds nothing.
-5. **Report.** :func:`pelletdem.loop_report.write_report` (and ``pelletdem loop``) writes the
-   errors before and after, on fit and held-out data, the residual plots and the ranking.
-
-The data are :mod:`pelletdem.loop_data`'s, the simulators :mod:`pelletdem.loop_simulators`'s
-and the fits :func:`pelletdem.loop_fit.fit_model`.
+1. **Baseline.** The paper's model with the base parameters free is designed, emulated and
+   fitted on the fit data (the conditions not held out). If most of its packings do not pass
+   the peak of their diametral test (no failure inside the window: the "peak" is the end of
+   the test, and a bond effect shows nothing), the simulator's window is widened (x 1.5, up
+   to dL/D = :data:`MAX_WINDOW`) and the baseline fitted again; what cannot be widened is
+   said in the verdict.
+2. **Residual.** The fitted model's residual (simulated on the fit seeds) is described by
+   :mod:`pelletdem.residuals` for the report: by part of the curve, by condition, trends.
+3. **Screen.** Every remaining candidate of the library is probed on top of the model and
+   ranked by the chi2 it could remove to first order (:func:`pelletdem.loop_screen.screen`).
+4. **Fit in full** the best ``screen_top`` candidates that pass the screening threshold: each
+   with its strength free, on a design of its own box, on the same packings.
+5. **Accept** a candidate when it passes all of: its fit chi2 falls by more than
+   ``threshold`` (chi-square with one degree of freedom at ``alpha`` divided by the number of
+   candidates screened, at least ln n, so its BIC falls too); on packings used neither in the
+   design nor in the fit (the *check seeds*), the chi2 of all the data (fit and held-out
+   conditions) falls by at least 4 and by ``min_check_gain`` of the model's excess over the
+   number of points, where that chi2 was above what noise gives (n + 2 sqrt(2 n)): a model
+   already at the noise level on fresh packings has nothing there to gain; and the held-out
+   conditions' chi2 does not rise by more than its noise (2 sqrt(2 n_held)). The fresh
+   packings are what a lucky packing cannot pass: an effect acting during compaction
+   re-packs the pellet at every strength, and the fit may pick the strength whose packing
+   happens to match; the check's packings are new at every strength alike. The best accepted
+   candidate (largest chi2 drop) is added, even if what remains is still structured, and the
+   loop goes back to 3 with the rest, up to ``max_effects``.
+6. **Report** every step: residual, screening, full fits, the effect added and why the others
+   were not, errors before and after on fit and held-out data, and what the data could have
+   revealed of each candidate (:func:`pelletdem.loop_screen.detection_power`).
 """
 from __future__ import annotations
 
@@ -49,318 +42,324 @@ from dataclasses import dataclass, field
 from typing import Callable, Dict, List, Mapping, Optional, Sequence
 
 import numpy as np
+from scipy import stats
 
 from .effects import EFFECTS, Effect
 from .loop_data import Condition, Dataset
-from .loop_fit import FitState, fit_model, zscores, zscores_many
+from .loop_emulator import Axis, Space
+from .loop_models import ModelFit, chi2_of, fit_model, nested_points
+from .loop_screen import Power, Screen, detection_power, screen
 from .loop_simulators import Simulator
-from .optimize import bounded_parameters, chi_square, gauss_newton_step, orthogonal_part
 from .residuals import DEFAULT_ALPHA, ResidualSummary, describe
 
-__all__ = ["Candidate", "LoopResult", "close_loop", "profile_start"]
+__all__ = ["FIT_SEEDS", "CHECK_SEEDS", "MAX_WINDOW", "unfailed", "Trial", "Step", "LoopResult", "close_loop",
+           "describe_residual"]
 
-_MPA = 1e6
+#: Packings every model is designed and fitted on, and the fresh ones its fit is checked on.
+FIT_SEEDS = (0, 1, 2, 3)
+CHECK_SEEDS = (100, 101, 102, 103)
+#: The widest diametral test window (dL/D) the loop widens to.
+MAX_WINDOW = 0.5
 
 
 @dataclass
-class Candidate:
-    """One effect as the loop saw it: ``explained`` (fraction of the structured residual its
-    signature explains to first order, 0-1), ``linear_strength`` (the first-order best value),
-    refit results (``fit``, ``fit_residual``), held-out chi-square ``heldout_chi2``,
-    penalised fit error ``bic``, whether it was ``accepted`` and ``why``."""
+class Trial:
+    """A candidate fitted in full: its ``model``, the emulated fit's chi2 drop
+    (``delta_chi2``), the chi2 of all the data on fresh packings before and after
+    (``check_before``, ``check_after``), whether it was ``accepted`` and ``why``."""
 
     effect: Effect
-    explained: float
-    linear_strength: float
-    signature: Optional[np.ndarray] = None
-    fit: Optional[FitState] = None
-    fit_residual: Optional[ResidualSummary] = None
-    heldout_chi2: float = math.nan
-    heldout_z: Optional[np.ndarray] = None
-    bic: float = math.nan
-    accepted: bool = False
-    why: str = ""
+    model: ModelFit
+    delta_chi2: float
+    check_before: float
+    check_after: float
+    accepted: bool
+    why: str
+
+
+@dataclass
+class Step:
+    """One round of forward selection: the ``model`` it started from, its ``residual``, the
+    ``screens``, the ``trials`` and the effect ``added`` (None when none was)."""
+
+    model: ModelFit
+    residual: ResidualSummary
+    screens: List[Screen]
+    trials: List[Trial]
+    added: Optional[str]
+    threshold: float
 
 
 @dataclass
 class LoopResult:
-    """Everything :func:`close_loop` found. ``chosen``: the effect added (None when none was);
-    ``verdict``: the sentence that sums it up; ``errors``: model -> {fit/held-out chi2 per
-    point, rms z, RRMSE}; ``baseline``/``final``: fits; ``residual_before``/``after``;
-    ``candidates`` ranked; ``n_simulations``; ``wall_time_s``."""
+    """Everything :func:`close_loop` found. ``chosen``: the effects added, in order;
+    ``verdict``: the sentence that sums it up; ``steps``; ``baseline`` and ``final`` models;
+    ``errors``: model name -> {fit / held-out chi2 per point and RRMSE}; ``power``: effect ->
+    what these data could reveal; ``n_simulations``; ``wall_time_s``; ``log``."""
 
     fit_data: Dataset
-    heldout_data: Dataset
-    baseline: FitState
-    residual_before: ResidualSummary
-    heldout_before: np.ndarray
-    candidates: List[Candidate]
-    chosen: Optional[str]
+    heldout_data: Optional[Dataset]
+    baseline: ModelFit
+    final: ModelFit
+    steps: List[Step]
+    chosen: List[str]
     verdict: str
-    final: FitState
-    residual_after: ResidualSummary
-    heldout_after: np.ndarray
     errors: Dict[str, Dict[str, float]]
+    power: Dict[str, Power]
     n_simulations: int
     wall_time_s: float
     log: List[str] = field(default_factory=list)
 
     def table(self) -> str:
         """The before/after errors as a Markdown table."""
-        rows = ["| model | fit: chi2/n | fit: RRMSE | held-out: chi2/n | held-out: RRMSE |",
-                "|---|---|---|---|---|"]
+        rows = ["| model | fit: chi2/n | fit: RRMSE | held-out: chi2/n | held-out: RRMSE |", "|---|---|---|---|---|"]
         for name, e in self.errors.items():
             rows.append(f"| {name} | {e['fit_chi2_per_point']:.2f} | {e['fit_rrmse']:.3f} | "
                         f"{e['heldout_chi2_per_point']:.2f} | {e['heldout_rrmse']:.3f} |")
         return "\n".join(rows)
 
 
-def _residual(data: Dataset, z: np.ndarray, n_params: int, alpha: float) -> ResidualSummary:
+def _fit_window(sim: Simulator, data: Dataset, say: Callable[[str], None]) -> str:
+    """Widen the simulator's diametral window (``max_dLD``, ``widen``) to the data's reach
+    (their last curve point and dL_f/D, plus 10 %) before any fit; the sentence to add to the
+    verdict when it cannot ('' when nothing is wrong)."""
+    xs = [o.x for o in data.observations if o.quantity == "sigma_1"]
+    xs += [o.value for o in data.observations if o.quantity == "dLf_D"]
+    end = getattr(sim, "max_dLD", None)
+    if not xs or end is None:
+        return ""
+    reach = 1.1 * max(xs)
+    if reach <= end:
+        return ""
+    if getattr(sim, "widen", None) is None or reach > MAX_WINDOW:
+        note = (f"the data reach dL/D = {max(xs):.3g}, beyond the simulated test window (dL/D up to {end:.3g}), "
+                "which cannot be widened so far")
+        say(note)
+        return note
+    say(f"the data reach dL/D = {max(xs):.3g}: the tests run to dL/D = {reach:.3g} instead of {end:.3g}")
+    sim.widen(reach)
+    return ""
+
+
+def unfailed(mf: ModelFit, data: Dataset) -> List[str]:
+    """Labels of the conditions with diametral data where most of the fitted model's packings
+    (fit seeds) did not pass the peak of their diametral test (scalar ``peaked`` below 1)."""
+    out = []
+    for c in data.conditions:
+        if not any(o.condition == c and o.quantity in ("sigma_1", "sigma_f", "dLf_D") for o in data.observations):
+            continue
+        peaked = [m.scalars.get("peaked", 1.0) for m in mf.direct[c].members if m.ok]
+        if peaked and np.mean(peaked) < 0.5:
+            out.append(c.label)
+    return out
+
+
+def off_unit(e: Effect, axis: Axis) -> float:
+    """Where on the candidate's axis the effect is off: its ``off`` value when inside the
+    bounds, else the bound nearest to it (a strength there is as good as off: a plate yield
+    stress of 50 MPa, a Weibull modulus of 30, a softening of 0.05)."""
+    if axis.lo < e.off < axis.hi:
+        return axis.to_unit(e.off)
+    return 1.0 if e.stronger == "lower" or e.off >= axis.hi else 0.0
+
+
+def describe_residual(data: Dataset, z: np.ndarray, n_params: int, alpha: float = DEFAULT_ALPHA) -> ResidualSummary:
+    """:func:`pelletdem.residuals.describe` of the misfits ``z`` of ``data``."""
     curves: Dict[str, List[int]] = {}
     for i, o in enumerate(data.observations):
         if o.curve:
             curves.setdefault(o.curve, []).append(i)
-    for name, idx in curves.items():
-        curves[name] = sorted(idx, key=lambda i: data.observations[i].x)
-    conds = data.conditions
-    levels = {"sigma_z [MPa]": {c.label: c.sigma_z / _MPA for c in conds},
-              "mc [%]": {c.label: c.mc for c in conds}}
-    return describe(z, parts=[o.part if o.part != "scalar" else o.quantity for o in data.observations],
-                    conditions=[o.condition.label for o in data.observations],
-                    curves={k: np.array(v) for k, v in curves.items()}, levels=levels,
-                    groups={"material": {c.label: c.material for c in conds}}, n_params=n_params,
-                    alpha=alpha)
+    curves = {k: sorted(v, key=lambda i: data.observations[i].x) for k, v in curves.items()}
+    labels = [o.condition.label for o in data.observations]
+    levels = {"sigma_z [MPa]": {c.label: c.sigma_z / 1e6 for c in data.conditions},
+              "mc [%]": {c.label: c.mc for c in data.conditions}}
+    groups = {"material": {c.label: c.material for c in data.conditions if c.material}}
+    zz = np.where(np.isfinite(z), z, 0.0)
+    return describe(zz, parts=[o.part for o in data.observations], conditions=labels, curves=curves,
+                    levels=levels, groups=groups, n_params=n_params, alpha=alpha)
 
 
-def _rrmse(data: Dataset, z: np.ndarray) -> float:
-    pred = data.values + z * data.sds
-    v = data.values
-    ok = np.abs(v) > 0
-    return float(np.sqrt(np.mean(((pred[ok] - v[ok]) / v[ok]) ** 2)))
+def _rrmse(ensembles, data: Optional[Dataset]) -> float:
+    if data is None:
+        return math.nan
+    rel = []
+    for o in data.observations:
+        m, _ = ensembles[o.condition].mean_se(o)
+        rel.append((m - o.value) / o.value if o.value else math.nan)
+    rel = np.asarray(rel, float)
+    return float(np.sqrt(np.nanmean(rel ** 2)))
 
 
-def _model_jitter(sim: Simulator, data: Dataset, params: Mapping[str, float], names: Sequence[str],
-                  rel: float = 1e-3) -> np.ndarray:
-    """The model's own scatter per observation (its unit): predictions at the base parameters
-    all raised and all lowered by ``rel``. A smooth model changes by ~rel there; a DEM pellet
-    breaks its bonds in another order and its curve jitters by as much as a new packing would.
-    Half the squared difference, pooled over each curve (condition and quantity), estimates
-    the jitter's variance."""
-    up = {**params, **{k: params[k] * (1 + rel) for k in names}}
-    down = {**params, **{k: params[k] * (1 - rel) for k in names}}
-    zu, zd = zscores_many(sim, [up, down], data)
-    d = (zu - zd) * data.sds
-    d = np.where(np.isfinite(d), d, 0.0)
-    out = np.zeros(len(data))
-    groups: Dict[tuple, List[int]] = {}
-    for i, o in enumerate(data.observations):
-        groups.setdefault((o.condition, o.quantity), []).append(i)
-    for idx in groups.values():
-        out[idx] = math.sqrt(float(np.mean(d[idx] ** 2)) / 2.0)
-    return out
+def _errors(mf: ModelFit, fit_data: Dataset, heldout: Optional[Dataset]) -> Dict[str, float]:
+    n_h = len(heldout) if heldout is not None else 0
+    return {"fit_chi2_per_point": chi2_of(mf.z_check_fit) / len(fit_data),
+            "fit_rrmse": _rrmse(mf.check, fit_data),
+            "heldout_chi2_per_point": chi2_of(mf.z_check_held) / n_h if n_h else math.nan,
+            "heldout_rrmse": _rrmse(mf.check, heldout)}
 
 
-def profile_start(sim: Simulator, data: Dataset, base: FitState, eff: Effect,
-                  base_bounds: Mapping[str, Sequence[float]], linear: float, points: int) -> Dict[str, float]:
-    """Start of a refit: the effect's strength on a grid over its bounds (``points`` values,
-    plus the first-order estimate ``linear``, in the effect's unit), each with the base
-    parameters moved by one Gauss-Newton step on the baseline's Jacobian; the best of all
-    these points, as {name: value} (SI) for the base parameters and the effect's. A DEM
-    objective is too rough for a local fit to find a strength from far away.
+def _check_chi2(mf: ModelFit) -> float:
+    """chi2 of all the data on the check seeds."""
+    held = chi2_of(mf.z_check_held) if mf.z_check_held is not None else 0.0
+    return chi2_of(mf.z_check_fit) + held
 
-    A strength at which every prediction equals the baseline's (the effect never acts: a
-    plate yield stress no contact reaches) is left out, with its step, while another strength
-    is usable: a refit started there has no gradient in the effect's parameter, and the
-    baseline's own step, which any such point gets, would win whenever the baseline is not
-    quite at its minimum."""
-    pars = bounded_parameters(base_bounds)
-    grid = list(np.geomspace(eff.lo, eff.hi, points) if eff.log else np.linspace(eff.lo, eff.hi, points))
-    grid.append(min(max(linear, eff.lo * (1.01 if eff.log else 1.0)), eff.hi))
-    first = [{**base.params, **eff.settings(v)} for v in grid]
-    zs = zscores_many(sim, first, data)
-    inactive = [bool(np.all(np.isfinite(z))) and np.allclose(z, base.z, rtol=1e-12, atol=1e-12) for z in zs]
-    second, second_inactive = [], []
-    for pset, z, off in zip(first, zs, inactive):
-        if not np.all(np.isfinite(z)) or base.jacobian.size == 0:
-            continue
-        du = gauss_newton_step(base.jacobian, z)
-        q = dict(pset)
-        for p, d in zip(pars, np.clip(du, -0.7, 0.7)):
-            q[p.name] = p.to_v(p.clip_u(p.to_u(pset[p.name]) + d))
-        second.append(q)
-        second_inactive.append(off)
-    tried = first + second
-    chis = np.array([chi_square(z) for z in zs + zscores_many(sim, second, data)])
-    off = np.array(inactive + second_inactive)
-    if np.any(~off & np.isfinite(chis)):
-        chis = np.where(off, np.inf, chis)
-    best = tried[int(np.argmin(chis))]
-    return {k: best[k] for k in list(base_bounds) + [eff.param]}
+
+def _held_chi2(mf: ModelFit) -> float:
+    return chi2_of(mf.z_check_held) if mf.z_check_held is not None else 0.0
 
 
 def close_loop(sim: Simulator, data: Dataset, base_bounds: Mapping[str, Sequence[float]],
-               start: Mapping[str, float], *, held_out: Optional[Callable[[Condition], bool]] = None,
-               heldout_data: Optional[Dataset] = None, library: Optional[Mapping[str, Effect]] = None,
-               fixed: Optional[Mapping[str, float]] = None, refit_top: int = 3, min_explained: float = 0.05,
-               min_heldout_gain: float = 0.3, clear_margin: float = 0.1, alpha: float = DEFAULT_ALPHA,
-               max_iter: int = 6, refit_iter: int = 5, fd_step: float = 0.1, profile_points: int = 5,
-               model_jitter: bool = True,
-               log: Optional[Callable[[str], None]] = None) -> LoopResult:
-    """Fit the baseline, describe its residual, rank the candidate effects, refit the best,
-    choose by held-out error with a parameter penalty, and return a :class:`LoopResult`.
+               start: Optional[Mapping[str, float]] = None, *,
+               held_out: Optional[Callable[[Condition], bool]] = None,
+               library: Optional[Mapping[str, Effect]] = None, fit_seeds: Sequence[int] = FIT_SEEDS,
+               check_seeds: Sequence[int] = CHECK_SEEDS, alpha: float = 0.01, screen_top: int = 2,
+               screen_threshold: float = 3.84, max_effects: int = 2, min_check_gain: float = 0.25,
+               n_design: Optional[int] = None, log: Optional[Callable[[str], None]] = None) -> LoopResult:
+    """Forward selection of candidate effects (see the module docstring).
 
-    ``data`` with ``held_out`` (a predicate on conditions) is split into fit and held-out
-    parts; or pass ``heldout_data`` separately. ``base_bounds``: the baseline's free
-    parameters ((lo, hi) in SI), ``start`` their start values; ``fixed``: parameters held.
-    ``library``: the candidates (default :data:`pelletdem.effects.EFFECTS`). See the module
-    docstring for the thresholds ``min_explained``, ``min_heldout_gain``, ``clear_margin``.
+    ``base_bounds``: {parameter: (lo, hi)} (SI) of the base parameters fitted in every model
+    (e.g. E_b and sigma_c, or per material ``E_b[oak]``); ``start`` (SI): a start for the
+    baseline's fit. ``held_out(condition)``: True for conditions kept out of every fit (None:
+    none; the check then uses the fit conditions' fresh packings). ``library``: candidates
+    (default :data:`pelletdem.effects.EFFECTS`). ``fit_seeds`` / ``check_seeds``: the
+    packings of the designs and fits, and of the checks (disjoint). ``alpha``: family-wise
+    level of the fit test. ``screen_top``: candidates fitted in full per round;
+    ``screen_threshold``: the first-order gain a candidate needs to be fitted in full.
+    ``max_effects``: rounds of forward selection. ``min_check_gain``: the fraction of the
+    model's excess chi2 on the check seeds a candidate must remove. ``n_design``: design points per model
+    (default :func:`pelletdem.loop_models.design_size`).
     """
     t0 = time.perf_counter()
     lines: List[str] = []
 
-    def say(s: str) -> None:
-        lines.append(s)
+    def say(msg: str) -> None:
+        lines.append(msg)
         if log is not None:
-            log(s)
+            log(msg)
 
-    for name, v, lo, hi in (("refit_top", refit_top, 1, 20), ("max_iter", max_iter, 0, 50),
-                            ("refit_iter", refit_iter, 0, 50), ("profile_points", profile_points, 2, 50)):
-        if not isinstance(v, int) or not lo <= v <= hi:
-            raise ValueError(f"{name} = {v!r} is out of range: allowed {lo} <= {name} <= {hi}")
-    for name, v in (("min_explained", min_explained), ("min_heldout_gain", min_heldout_gain),
-                    ("clear_margin", clear_margin), ("alpha", alpha)):
-        if not (isinstance(v, (int, float)) and 0 < v < 1):
-            raise ValueError(f"{name} = {v!r} is out of range: allowed 0 < {name} < 1")
-    if heldout_data is None:
-        if held_out is None:
-            raise ValueError("give held_out (a predicate on conditions) or heldout_data: the loop "
-                             "chooses by the error on data not used in the fit")
-        fit_data, heldout_data = data.split(held_out)
-    else:
-        fit_data = data
+    if set(fit_seeds) & set(check_seeds):
+        raise ValueError("fit_seeds and check_seeds must be disjoint packings")
+    if not 0 < alpha < 1:
+        raise ValueError(f"alpha = {alpha!r} is out of range: allowed 0 < alpha < 1")
+    if not 0 <= min_check_gain < 1:
+        raise ValueError(f"min_check_gain = {min_check_gain!r} is out of range: allowed 0 <= gain < 1")
+    if not (isinstance(max_effects, int) and 0 <= max_effects <= 10):
+        raise ValueError(f"max_effects = {max_effects!r} is out of range: allowed 0..10")
+    if not (isinstance(screen_top, int) and 1 <= screen_top <= 20):
+        raise ValueError(f"screen_top = {screen_top!r} is out of range: allowed 1..20")
+    if not base_bounds:
+        raise ValueError("base_bounds: at least one base parameter must be fitted")
+    axes = tuple(Axis(k, float(b[0]), float(b[1]), float(b[0]) > 0) for k, b in base_bounds.items())
+    for k, v in (start or {}).items():
+        if k not in base_bounds:
+            raise ValueError(f"start: {k!r} is not among the fitted parameters {sorted(base_bounds)}")
+        lo, hi = base_bounds[k][0], base_bounds[k][1]
+        if not (isinstance(v, (int, float)) and lo <= v <= hi):
+            raise ValueError(f"start: {k} = {v!r} is outside its bounds [{lo:g}, {hi:g}]")
+    fit_data, heldout = data.split(held_out or (lambda c: False))
     library = dict(EFFECTS if library is None else library)
-    fixed = dict(fixed or {})
-    n_fit = len(fit_data)
+    n = len(fit_data)
+    say(f"data: {n} fit observations of {len(fit_data.conditions)} conditions"
+        + (f", {len(heldout)} held out ({', '.join(c.label for c in heldout.conditions)})" if heldout else
+           ", none held out (the checks use fresh packings of the fit conditions)"))
 
-    say(f"baseline fit of {list(base_bounds)} to {n_fit} points ({len(fit_data.conditions)} conditions)")
-    base = fit_model(sim, fit_data, base_bounds, start, fixed, max_iter=max_iter, fd_step=fd_step, log=say)
-    k0 = len(base.free)
-    if model_jitter:
-        both = Dataset(fit_data.observations + heldout_data.observations, data.name)
-        jit = _model_jitter(sim, both, base.params, list(base_bounds))
-        if np.any(jit > 0):
-            both = both.with_model_sd(jit)
-            fit_data = Dataset(both.observations[:n_fit], fit_data.name)
-            heldout_data = Dataset(both.observations[n_fit:], heldout_data.name)
-            rel = np.sqrt(np.mean((jit / np.maximum(np.abs(both.values), 1e-300)) ** 2))
-            say(f"model jitter (base parameters +-0.1%): rms {rel:.3f} "
-                "of the measured values, added to the SDs in quadrature")
-            # The SDs changed, so the chi-square did: the baseline is refitted with them, as
-            # every candidate will be, or a candidate would win by the refit alone.
-            say("baseline refitted with those SDs")
-            base = fit_model(sim, fit_data, base_bounds, base.params, fixed, max_iter=max_iter, fd_step=fd_step,
-                             log=say)
-    res0 = _residual(fit_data, base.z, k0, alpha)
-    for s in res0.lines():
-        say("  " + s)
-    z_held0 = zscores(sim, base.params, heldout_data)
-    chi_held0 = chi_square(z_held0)
-    bic0 = base.chi2 + k0 * math.log(n_fit)
-    say(f"held-out: chi2/n = {chi_held0 / len(heldout_data):.2f} on {len(heldout_data)} points")
+    def fit(space: Space, effects, start_params=None, shared=None) -> ModelFit:
+        n = n_design if n_design is not None or shared is None else max(8, 4 * space.dim)
+        return fit_model(sim, space, effects, fit_data, heldout, fit_seeds, check_seeds, start_params, n, say,
+                         shared=shared)
 
-    candidates: List[Candidate] = []
-    chosen, verdict, final, res_final, z_held_final = None, "", base, res0, z_held0
-    if not res0.structured:
-        verdict = ("the baseline's residual is consistent with the replicate scatter: "
-                   "nothing to explain, no effect added")
-    else:
-        r_perp = orthogonal_part(base.jacobian, base.z)
-        conds = fit_data.conditions
-        usable = [e for e in library.values() if not (e.needs and len({getattr(c, e.needs) for c in conds}) < 2)]
-        probes = zscores_many(sim, [{**base.params, **e.settings(e.probe)} for e in usable], fit_data)
-        zprobe = {e.name: z for e, z in zip(usable, probes)}
-        for eff in library.values():
-            if eff.name not in zprobe:
-                candidates.append(Candidate(eff, 0.0, eff.off, why=f"the fit data have one {eff.needs} level"))
-                continue
-            zp = zprobe[eff.name]
-            if not np.all(np.isfinite(zp)):
-                candidates.append(Candidate(eff, 0.0, eff.off, why="simulation failed at the probe strength"))
-                continue
-            sig = zp - base.z
-            s_perp = orthogonal_part(base.jacobian, sig)
-            ss = float(s_perp @ s_perp)
-            rr = float(r_perp @ r_perp)
-            if ss <= 1e-12 * max(rr, 1e-300):
-                candidates.append(Candidate(eff, 0.0, eff.off, sig, why="no signature beyond the base parameters"))
-                continue
-            a = -float(r_perp @ s_perp) / ss  # best multiple of the probe's signature
-            frac = (float(r_perp @ s_perp) ** 2) / (ss * rr) if rr > 0 else 0.0
-            strength = eff.off + a * (eff.probe - eff.off)
-            why = ""
-            if a <= 0 and eff.off == 0.0 and eff.lo >= 0:
-                frac, why = 0.0, "its signature points the other way"
-            candidates.append(Candidate(eff, frac, strength, sig, why=why))
-        # Ranked by the fraction explained as printed (two digits); candidates tied there are
-        # refitted cheapest first: a 'diametral' effect branches off the cached relaxed
-        # pellets, a 'compaction' one needs new pellets for every strength it tries.
-        candidates.sort(key=lambda c: (-round(c.explained, 2), c.effect.stage != "diametral"))
-        say("candidate signatures (fraction of the structured residual explained to first order):")
-        for c in candidates:
-            say(f"  {c.effect.name:>20}: {c.explained:.2f}  {c.why}")
-
-        tried = [c for c in candidates if c.explained >= min_explained][:refit_top]
-        for c in tried:
-            eff = c.effect
-            bounds = dict(base_bounds)
-            bounds[eff.param] = (eff.lo, eff.hi)
-            st = profile_start(sim, fit_data, base, eff, base_bounds, c.linear_strength, profile_points)
-            x0 = st[eff.param]
-            fx = dict(fixed)
-            fx.update({k: v for k, v in eff.settings(x0).items() if k != eff.param})
-            say(f"refit with {eff.name} from {eff.param} = {x0:.4g} (best of a {profile_points}-point profile)")
-            try:
-                c.fit = fit_model(sim, fit_data, bounds, st, fx, max_iter=refit_iter, fd_step=fd_step, log=say)
-            except RuntimeError as e:
-                c.why = f"refit failed: {e}"
-                continue
-            c.fit_residual = _residual(fit_data, c.fit.z, len(c.fit.free), alpha)
-            c.heldout_z = zscores(sim, c.fit.params, heldout_data)
-            c.heldout_chi2 = chi_square(c.heldout_z)
-            c.bic = c.fit.chi2 + len(c.fit.free) * math.log(n_fit)
-            gain = 1.0 - c.heldout_chi2 / chi_held0 if chi_held0 > 0 else 0.0
-            if not c.bic < bic0:
-                c.why = f"penalised fit error not lower (BIC {c.bic:.1f} vs {bic0:.1f})"
-            elif not gain >= min_heldout_gain:
-                c.why = (f"held-out chi2 changes by {-100 * gain:+.0f}% (needs to fall by "
-                         f"{100 * min_heldout_gain:.0f}%)")
-            elif c.fit_residual.structured:
-                c.why = "the refitted residual is still structured (" + "; ".join(c.fit_residual.reasons) + ")"
+    window_note = _fit_window(sim, fit_data, say)
+    model = fit(Space(axes), (), dict(start) if start else None)
+    # a fitted model that does not fail inside the test window shows the bond effects nothing
+    # (its "peak" is the end of the test): widen the window where the simulator can
+    for _ in range(2):
+        late = unfailed(model, fit_data)
+        if not late:
+            break
+        end = getattr(sim, "max_dLD", math.nan)
+        if getattr(sim, "widen", None) is None or not end < MAX_WINDOW:
+            window_note = (f"the fitted model does not fail within the test window (dL/D up to {end:.3g}) at "
+                           f"{', '.join(late)}: its sigma_f and dL_f/D there are the end of the test, not a failure")
+            say(window_note)
+            break
+        new_end = min(MAX_WINDOW, 1.5 * end)
+        say(f"the fitted model does not fail within the test window (dL/D up to {end:.3g}) at {', '.join(late)}: "
+            f"the tests now run to dL/D = {new_end:.3g} and the model is fitted again")
+        sim.widen(new_end)
+        model = fit(Space(axes), (), dict(model.fit.params))
+    baseline = model
+    errors = {model.name: _errors(model, fit_data, heldout)}
+    steps: List[Step] = []
+    chosen: List[str] = []
+    powers: Dict[str, Power] = {}
+    n_rep = int(np.median([o.n for o in fit_data.observations]))
+    while True:
+        residual = describe_residual(fit_data, model.z_direct, model.n_params)
+        remaining = [e for name, e in library.items() if name not in chosen]
+        if not remaining or len(chosen) >= max_effects:
+            steps.append(Step(model, residual, [], [], None, math.nan))
+            break
+        screens = screen(sim, model, remaining, fit_data, fit_seeds)
+        k = max(1, sum(1 for s in screens if not s.skipped))
+        threshold = max(float(stats.chi2.isf(alpha / k, 1)), math.log(n))
+        for s in screens:
+            powers[s.effect.name] = detection_power(s, model, fit_data, threshold, n_rep, len(fit_seeds))
+        say("screened: " + ", ".join(f"{s.effect.name} {s.gain:.1f}" if not s.skipped else f"{s.effect.name} (-)"
+                                     for s in screens) + f"; fit test threshold {threshold:.1f}")
+        trials: List[Trial] = []
+        base_before, held_before = _check_chi2(model), _held_chi2(model)
+        n_held = len(heldout) if heldout is not None else 0
+        n_check = n + n_held
+        noise_level = n_check + 2.0 * math.sqrt(2.0 * n_check)
+        for s in [s for s in screens if not s.skipped and s.gain >= screen_threshold][:screen_top]:
+            e = s.effect
+            axis = Axis(e.param, e.lo, e.hi, e.log)
+            space = model.space.with_axis(axis, e.fixed)
+            cand = fit(space, model.effects + (e.name,), dict(model.fit.params, **e.settings(s.strength)),
+                       nested_points(model, off_unit(e, axis)))
+            drop = model.fit.chi2 - cand.fit.chi2
+            after, held_after = _check_chi2(cand), _held_chi2(cand)
+            need = max(4.0, min_check_gain * (base_before - n_check))
+            held_worse = held_after - held_before
+            if drop < threshold:
+                ok, why = False, f"fit chi2 fell by {drop:.1f}, below the threshold {threshold:.1f}"
+            elif base_before <= noise_level:
+                ok, why = False, (f"on fresh packings the model's chi2 ({base_before:.1f} on {n_check} points) is "
+                                  f"already at the noise level ({noise_level:.1f}): nothing to confirm it there")
+            elif base_before - after < need:
+                ok, why = False, (f"chi2 on fresh packings {base_before:.1f} -> {after:.1f}: it needed to fall "
+                                  f"by {need:.1f}")
+            elif n_held and held_worse > 2.0 * math.sqrt(2.0 * n_held):
+                ok, why = False, (f"the held-out chi2 rose {held_before:.1f} -> {held_after:.1f} on fresh packings: "
+                                  "it does not carry over to the held-out conditions")
             else:
-                c.accepted = True
-                c.why = f"held-out chi2 -{100 * gain:.0f}%, BIC {bic0:.1f} -> {c.bic:.1f}, residual now noise"
-            say(f"  {eff.name}: {c.why}")
-        ok = sorted([c for c in tried if c.accepted], key=lambda c: c.heldout_chi2)
-        if not ok:
-            verdict = "no candidate explains this residual"
-        elif len(ok) > 1 and ok[1].heldout_chi2 <= (1 + clear_margin) * ok[0].heldout_chi2:
-            verdict = (f"no candidate wins clearly ({ok[0].effect.name} and {ok[1].effect.name} "
-                       f"explain the residual equally well on held-out data): no effect added")
-        else:
-            best = ok[0]
-            chosen, final, res_final, z_held_final = best.effect.name, best.fit, best.fit_residual, best.heldout_z
-            verdict = (f"added {best.effect.name} ({best.effect.param} = "
-                       f"{best.fit.params[best.effect.param]:.4g} {best.effect.unit}): {best.why}")
-    say("verdict: " + verdict)
+                ok, why = True, (f"fit chi2 -{drop:.1f} (threshold {threshold:.1f}); chi2 on fresh packings "
+                                 f"{base_before:.1f} -> {after:.1f}" + (f" (held out {held_before:.1f} -> "
+                                                                         f"{held_after:.1f})" if n_held else ""))
+            trials.append(Trial(e, cand, drop, base_before, after, ok, why))
+            errors[cand.name] = _errors(cand, fit_data, heldout)
+            say(f"{e.name}: {'accepted' if ok else 'not accepted'}: {why}")
+        accepted = [t for t in trials if t.accepted]
+        added = max(accepted, key=lambda t: t.delta_chi2) if accepted else None
+        steps.append(Step(model, residual, screens, trials, added.effect.name if added else None, threshold))
+        if added is None:
+            break
+        chosen.append(added.effect.name)
+        model = added.model
+    verdict = _verdict(chosen, steps, baseline)
+    if window_note:
+        verdict += f" ({window_note})"
+    say(verdict)
+    return LoopResult(fit_data, heldout, baseline, model, steps, chosen, verdict, errors, powers,
+                      sim.n_simulations, time.perf_counter() - t0, lines)
 
-    def errs(fs: FitState, zh: np.ndarray) -> Dict[str, float]:
-        return {"fit_chi2_per_point": fs.chi2 / n_fit, "fit_rrmse": _rrmse(fit_data, fs.z),
-                "heldout_chi2_per_point": chi_square(zh) / len(heldout_data), "heldout_rrmse": _rrmse(heldout_data, zh),
-                "n_params": float(len(fs.free))}
 
-    errors = {"baseline": errs(base, z_held0)}
-    if chosen is not None:
-        errors[f"baseline + {chosen}"] = errs(final, z_held_final)
-    return LoopResult(fit_data, heldout_data, base, res0, z_held0, candidates, chosen, verdict, final, res_final,
-                      z_held_final, errors, sim.n_simulations, time.perf_counter() - t0, lines)
-
+def _verdict(chosen: Sequence[str], steps: Sequence[Step], baseline: ModelFit) -> str:
+    if chosen:
+        return "added " + ", then ".join(chosen)
+    first = steps[0]
+    if not first.trials:
+        if first.residual.structured:
+            return "no candidate explains this residual"
+        return "nothing to explain: the residual is consistent with the data's and the model's scatter"
+    return "no candidate explains this residual"

@@ -1,15 +1,22 @@
-"""Simulators for the discrepancy loop: parameters -> a :class:`Prediction` per condition.
+"""Simulators for the discrepancy loop: parameters and packings -> predictions per condition.
 
-:class:`Simulator` is the interface the loop's fits call (:meth:`Simulator.predict`, and
-:meth:`Simulator.predict_many` for a Jacobian's columns at once). :class:`EngineSimulator`
-runs the C++ pellet through the calibration's run cache, relaxed-pellet reuse and executors
-(:mod:`pelletdem.runs`, :mod:`pelletdem.execution`); :class:`FunctionSimulator` wraps any
-Python function (used by fast tests with an analytic model, and for surrogate models).
+A DEM pellet is one draw from a distribution: another packing (seed) breaks its bonds in
+another order. So a simulator predicts each condition on a list of packings, and an
+:class:`Ensemble` holds those predictions: for an observation it gives the mean over the
+packings and its standard error from their spread (:meth:`Ensemble.mean_se`). The loop
+evaluates every parameter set on the same packings (common random numbers), so differences
+between parameter sets are paired.
+
+:class:`EngineSimulator` runs the C++ pellet through the calibration's run cache,
+relaxed-pellet reuse and executors (:mod:`pelletdem.runs`, :mod:`pelletdem.execution`);
+:class:`FunctionSimulator` wraps a Python function of (parameters, condition, seed) (fast tests
+with an analytic pellet, and users' own surrogate models).
 """
 from __future__ import annotations
 
 import contextlib
 import dataclasses
+import inspect
 import math
 from dataclasses import dataclass, field
 from typing import Callable, Dict, List, Mapping, Optional, Sequence, Tuple
@@ -18,19 +25,24 @@ import numpy as np
 
 from .engine import BondLaw
 from .execution import Evaluator, open_executor, with_relaxed_dir
-from .loop_data import COMPACTION_SPLIT, Condition, Dataset, Observation, diametral_part
+from .loop_data import Condition, Observation
 from .run_cache import RunCache
-from .runs import make_spec, run_setup
+from .runs import check_names, make_spec, run_setup
 from .worker import run_point
 
-__all__ = ["Prediction", "Simulator", "FunctionSimulator", "EngineSimulator", "synthetic_dataset"]
+__all__ = ["Prediction", "Ensemble", "Simulator", "FunctionSimulator", "EngineSimulator"]
+
+# make_spec's base names and the law fields they set
+_ALIASES = (("E_b", "youngs_modulus"), ("sigma_c", "sigma_c"), ("tau_c", "tau_c"), ("r_b", "radius"), ("k1", "k1"),
+            ("p_y", "k1"))
 
 
 @dataclass
 class Prediction:
-    """What a model predicts for one condition. ``curve``: (dL/D, sigma_1 Pa) arrays;
-    ``compaction``: (dh/h0, sigma_z Pa); ``scalars``: sigma_f (Pa), dLf_D (-), bulk_density
-    (kg/m^3). ``ok`` False (with ``error``) when the simulation failed."""
+    """What a model predicts for one condition on one packing. ``curve``: (dL/D, sigma_1 Pa)
+    arrays; ``compaction``: (dh/h0, sigma_z Pa); ``scalars``: sigma_f (Pa), dLf_D (-),
+    bulk_density (kg/m^3), coordination_number (-), peaked (1.0 when the diametral test passed
+    its peak). ``ok`` False (with ``error``) when the simulation failed."""
 
     curve: Optional[Tuple[np.ndarray, np.ndarray]] = None
     compaction: Optional[Tuple[np.ndarray, np.ndarray]] = None
@@ -39,10 +51,10 @@ class Prediction:
     error: str = ""
 
     def value(self, o: Observation) -> float:
-        """The prediction of observation ``o`` (NaN when it cannot be made)."""
+        """The prediction of observation ``o`` in its SI unit (NaN when it cannot be made)."""
         if not self.ok:
             return float("nan")
-        if o.quantity == "sigma_1" or o.quantity == "sigma_z":
+        if o.quantity in ("sigma_1", "sigma_z"):
             xy = self.curve if o.quantity == "sigma_1" else self.compaction
             if xy is None or len(xy[0]) == 0:
                 return float("nan")
@@ -56,18 +68,59 @@ class Prediction:
         return float(self.scalars.get(o.quantity, float("nan")))
 
 
+@dataclass
+class Ensemble:
+    """One condition's predictions on several packings (``seeds``, one Prediction each)."""
+
+    seeds: Tuple[int, ...]
+    members: Tuple[Prediction, ...]
+
+    @property
+    def ok(self) -> bool:
+        """True when every packing's simulation succeeded."""
+        return all(m.ok for m in self.members)
+
+    @property
+    def error(self) -> str:
+        """The first failed packing's error ('' when none failed)."""
+        return next((m.error for m in self.members if not m.ok), "")
+
+    def values(self, o: Observation) -> np.ndarray:
+        """Observation ``o`` predicted on each packing (its SI unit)."""
+        return np.array([m.value(o) for m in self.members], float)
+
+    def mean_se(self, o: Observation) -> Tuple[float, float]:
+        """The mean over the packings of observation ``o`` and the standard error of that
+        mean, SD / sqrt(k) (0 for one packing), both in the observation's SI unit."""
+        v = self.values(o)
+        if not np.all(np.isfinite(v)):
+            return float("nan"), float("nan")
+        return float(v.mean()), (float(v.std(ddof=1) / math.sqrt(len(v))) if len(v) > 1 else 0.0)
+
+    def scalar(self, name: str) -> float:
+        """A scalar output averaged over the packings (NaN when missing)."""
+        v = [m.scalars.get(name, float("nan")) for m in self.members]
+        return float(np.mean(v)) if v else float("nan")
+
+
 class Simulator:
-    """Predicts observations from parameters. Subclasses implement :meth:`predict`."""
+    """Predicts observations from parameters on given packings. Subclasses implement
+    :meth:`predict_many`."""
 
-    def predict(self, params: Mapping[str, float], conditions: Sequence[Condition]) -> Dict[Condition, Prediction]:
-        """Predictions for each condition under ``params`` (base names, ``contact.x``, ``bond.x``)."""
+    #: Packings a prediction is averaged over when no seeds are given.
+    default_seeds: Tuple[int, ...] = (0,)
+
+    def predict(self, params: Mapping[str, float], conditions: Sequence[Condition],
+                seeds: Optional[Sequence[int]] = None) -> Dict[Condition, Ensemble]:
+        """Predictions for each condition under ``params`` (base names, ``contact.x``,
+        ``bond.x``, SI) on the packings ``seeds`` (default :attr:`default_seeds`)."""
+        return self.predict_many([params], conditions, seeds)[0]
+
+    def predict_many(self, params_list: Sequence[Mapping[str, float]], conditions: Sequence[Condition],
+                     seeds: Optional[Sequence[int]] = None) -> List[Dict[Condition, Ensemble]]:
+        """:meth:`predict` for several parameter sets (a simulator with workers runs them all
+        at once)."""
         raise NotImplementedError
-
-    def predict_many(self, params_list: Sequence[Mapping[str, float]],
-                     conditions: Sequence[Condition]) -> List[Dict[Condition, Prediction]]:
-        """:meth:`predict` for several parameter sets (a simulator with workers runs them
-        all at once: a Jacobian's columns in parallel)."""
-        return [self.predict(p, conditions) for p in params_list]
 
     @property
     def n_simulations(self) -> int:
@@ -77,28 +130,47 @@ class Simulator:
     def close(self) -> None:
         """Release workers (no-op by default)."""
 
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
 
 class FunctionSimulator(Simulator):
-    """A simulator from a Python function ``fn(params, condition) -> Prediction`` (for analytic
-    test models and for users' own surrogate models)."""
+    """A simulator from a Python function ``fn(params, condition, seed) -> Prediction`` (a
+    function of (params, condition) is taken too: it then predicts the same on every packing).
+    Repeated calls are memoised."""
 
-    def __init__(self, fn: Callable[[Mapping[str, float], Condition], Prediction]):
+    def __init__(self, fn: Callable[..., Prediction], default_seeds: Sequence[int] = (0,)):
         if not callable(fn):
             raise ValueError("fn must be callable")
-        self.fn = fn
+        try:
+            n_args = len(inspect.signature(fn).parameters)
+        except (TypeError, ValueError):
+            n_args = 3
+        self.fn = fn if n_args >= 3 else (lambda p, c, s: fn(p, c))
+        self.default_seeds = tuple(int(s) for s in default_seeds)
         self._n = 0
         self._memo: Dict[tuple, Prediction] = {}
 
-    def predict(self, params, conditions):
-        """Calls ``fn`` once per new (params, condition); repeated calls are memoised."""
-        key0 = tuple(sorted((k, float(v)) for k, v in params.items()))
-        out = {}
-        for c in conditions:
-            key = (key0, c)
-            if key not in self._memo:
-                self._n += 1
-                self._memo[key] = self.fn(dict(params), c)
-            out[c] = self._memo[key]
+    def predict_many(self, params_list, conditions, seeds=None):
+        """Calls ``fn`` once per new (params, condition, seed)."""
+        seeds = tuple(self.default_seeds if seeds is None else seeds)
+        out = []
+        for params in params_list:
+            key0 = tuple(sorted((k, float(v)) for k, v in params.items()))
+            d = {}
+            for c in conditions:
+                members = []
+                for s in seeds:
+                    key = (key0, c, s)
+                    if key not in self._memo:
+                        self._n += 1
+                        self._memo[key] = self.fn(dict(params), c, s)
+                    members.append(self._memo[key])
+                d[c] = Ensemble(seeds, tuple(members))
+            out.append(d)
         return out
 
     @property
@@ -108,24 +180,31 @@ class FunctionSimulator(Simulator):
 
 
 class EngineSimulator(Simulator):
-    """The C++ pellet: fill -> compact (condition's sigma_z) -> ... -> diametral test, through
-    the calibration's run cache, relaxed-pellet reuse and executors (:mod:`pelletdem.runs`,
-    :mod:`pelletdem.execution`).
+    """The C++ pellet: fill -> compact (the condition's sigma_z) -> ... -> diametral test,
+    through the calibration's run cache, relaxed-pellet reuse and executors
+    (:mod:`pelletdem.runs`, :mod:`pelletdem.execution`).
 
     ``preset``: name or Preset; ``bond``: base BondLaw; ``contact``: ContactLaw field
-    overrides; ``seeds``: packings averaged per condition; ``max_dLD``: end of the test;
-    ``executor``/``max_workers``: as in :func:`pelletdem.calibrate.scan` ('serial' runs here);
-    ``cache_dir``: run cache directory (resumable); ``relaxed_dir``: relaxed-pellet checkpoints.
-    Parameters: base names of :data:`pelletdem.calibrate.PARAMETERS`, optionally per material
-    as ``name[material]``, and any ``contact.<field>`` / ``bond.<field>``. The condition's
-    moisture content is passed to the bond law (``bond.moisture_content``).
+    overrides; ``seeds``: the default packings; ``max_dLD``: end of the test; ``break_drop``:
+    end the test once the plate force has fallen to this fraction of its peak (0: off; the
+    failure and the first part of the fall are what the data show); ``executor`` /
+    ``max_workers``: as in :func:`pelletdem.calibrate.scan` ('serial' runs here);
+    ``cache_dir``: run cache directory (resumable); ``relaxed_dir``: relaxed-pellet
+    checkpoints. Parameters: base names of :data:`pelletdem.calibrate.PARAMETERS`, optionally
+    per material as ``name[material]``, and any ``contact.<field>`` / ``bond.<field>``. The
+    condition's moisture content is passed to the bond law (``bond.moisture_content``).
     """
 
     def __init__(self, preset="tiny", *, bond=None, contact: Optional[Mapping[str, float]] = None,
-                 seeds: Sequence[int] = (0,), max_dLD: Optional[float] = None, executor="serial",
-                 max_workers: Optional[int] = None, cache_dir=None, relaxed_dir=None):
+                 seeds: Sequence[int] = (0,), max_dLD: Optional[float] = None, break_drop: float = 0.0,
+                 executor="serial", max_workers: Optional[int] = None, cache_dir=None, relaxed_dir=None):
         self.setup = run_setup(preset, bond if bond is not None else BondLaw(), dict(contact or {}),
-                               seeds, max_dLD)
+                               tuple(seeds), max_dLD)
+        if break_drop:
+            if not 0.0 < break_drop < 1.0:
+                raise ValueError(f"break_drop = {break_drop!r} is out of range: allowed 0 < break_drop < 1")
+            self.setup = dataclasses.replace(self.setup, preset=self.setup.preset.with_(break_drop=break_drop))
+        self.default_seeds = tuple(int(s) for s in seeds)
         self._stack = contextlib.ExitStack()
         ex = self._stack.enter_context(open_executor(executor, max_workers))
         runner = with_relaxed_dir(run_point, relaxed_dir)
@@ -135,11 +214,14 @@ class EngineSimulator(Simulator):
         """Shut the executor down."""
         self._stack.close()
 
-    def __enter__(self):
-        return self
+    @property
+    def max_dLD(self) -> float:
+        """The end of the diametral test, dL/D (-)."""
+        return float(self.setup.max_dLD if self.setup.max_dLD is not None else self.setup.preset.max_dLD)
 
-    def __exit__(self, *exc):
-        self.close()
+    def widen(self, max_dLD: float) -> None:
+        """Run later diametral tests to ``max_dLD`` (-): a test that ended before its peak."""
+        self.setup = dataclasses.replace(self.setup, max_dLD=float(max_dLD))
 
     @property
     def n_simulations(self) -> int:
@@ -159,101 +241,38 @@ class EngineSimulator(Simulator):
                     base[root] = v
             else:
                 base[name] = v
-        law = dataclasses.replace(self.setup.bond, **bond, moisture_content=float(cond.mc))
-        return make_spec(base, preset=self.setup.preset, sigma_z=cond.sigma_z, seed=seed, bond=law,
+        for alias, fld in _ALIASES:
+            if alias in base and fld in (contact if fld in ("k1",) else bond):
+                raise ValueError(f"{alias} and {'contact' if fld == 'k1' else 'bond'}.{fld} both set: give one")
+        spec = make_spec(base, preset=self.setup.preset, sigma_z=cond.sigma_z, seed=seed, bond=self.setup.bond,
                          contact=contact, max_dLD=self.setup.max_dLD)
+        check_names(bond, {f.name: f for f in dataclasses.fields(BondLaw)}, "bond law field")
+        # the law's own fields last: make_spec's aliases (sigma_c sets tau_c) must not undo them
+        law = dataclasses.replace(spec.bond, **bond, moisture_content=float(cond.mc))
+        law.to_core()
+        return dataclasses.replace(spec, bond=law)
 
-    def predict(self, params, conditions):
-        """Run (or fetch from the cache) every (condition, seed) and average over seeds."""
-        return self.predict_many([params], conditions)[0]
-
-    def predict_many(self, params_list, conditions):
-        """All parameter sets' runs submitted together, so the workers share them out."""
-        specs = [(k, c, self._spec(p, c, s)) for k, p in enumerate(params_list) for c in conditions
-                 for s in self.setup.seeds]
-        recs = self.evaluator.run_all([s for _, _, s in specs])
-        out = []
-        for k in range(len(params_list)):
-            d = {}
-            for c in conditions:
-                d[c] = _prediction_from_records([r for (kk, cc, _), r in zip(specs, recs) if kk == k and cc == c])
-            out.append(d)
-        return out
-
-
-def _mean_curve(curves: Sequence[Tuple[np.ndarray, np.ndarray]], points: int = 200):
-    curves = [(np.asarray(x, float), np.asarray(y, float)) for x, y in curves if len(x)]
-    if not curves:
-        return None
-    if len(curves) == 1:
-        return curves[0]
-    lo, hi = max(x.min() for x, _ in curves), min(x.max() for x, _ in curves)
-    grid = np.linspace(lo, hi, points)
-    ys = [np.interp(grid, x[np.argsort(x, kind="stable")], y[np.argsort(x, kind="stable")]) for x, y in curves]
-    return grid, np.mean(ys, axis=0)
+    def predict_many(self, params_list, conditions, seeds=None):
+        """Every (parameter set, condition, packing) run (or fetched from the cache) together,
+        so the workers share them out."""
+        seeds = tuple(self.default_seeds if seeds is None else seeds)
+        specs = [(k, c, s, self._spec(p, c, s)) for k, p in enumerate(params_list) for c in conditions
+                 for s in seeds]
+        recs = self.evaluator.run_all([sp for _, _, _, sp in specs])
+        by_key = {(k, c, s): rec for (k, c, s, _), rec in zip(specs, recs)}
+        return [{c: Ensemble(seeds, tuple(_prediction(by_key[(k, c, s)]) for s in seeds)) for c in conditions}
+                for k in range(len(params_list))]
 
 
-def _prediction_from_records(recs: Sequence[dict]) -> Prediction:
-    bad = [r for r in recs if not r["ok"]]
-    if bad:
-        return Prediction(ok=False, error=bad[0].get("error") or "failed")
-    sc = {}
-    for key, out in (("sigma_f", "sigma_f"), ("dLf_D", "dLf_D"), ("bulk_density", "bulk_density_relaxed")):
-        vals = [r["outputs"].get(out, float("nan")) for r in recs]
-        sc[key] = float(np.mean(vals))
-    curve = _mean_curve([(r["curve"].get("dL_D", []), r["curve"].get("sigma_1", [])) for r in recs])
-    comp = _mean_curve([(r["compaction_curve"].get("dh_h0", []), r["compaction_curve"].get("sigma_z", []))
-                        for r in recs])
-    return Prediction(curve, comp, sc)
-
-
-def synthetic_dataset(sim: Simulator, truth: Mapping[str, float], conditions: Sequence[Condition], *,
-                      noise: float = 0.05, replicates: int = 5, points: int = 12,
-                      quantities: Sequence[str] = ("sigma_1", "sigma_f", "dLf_D", "bulk_density"),
-                      compaction_points: int = 0, seed: int = 0, name: str = "synthetic") -> Dataset:
-    """"Measured" data made by ``sim`` with parameters ``truth`` (which may switch on any
-    effect, in the library or not), with Gaussian noise of relative SD ``noise`` per replicate
-    (curve points: relative to the curve's peak), ``replicates`` replicates averaged, so the
-    reported SD is the replicates' sample SD. ``points`` points per diametral curve from
-    0.1 to 1.6 x its failure point (within the simulated range); ``compaction_points`` on the
-    compaction curve (0: none). Nothing in the returned Dataset says which effect made it.
-    """
-    if not (isinstance(noise, (int, float)) and 0 <= noise < 1):
-        raise ValueError(f"noise = {noise!r} is out of range: allowed 0 <= noise < 1")
-    if not isinstance(replicates, int) or not 2 <= replicates <= 100:
-        raise ValueError(f"replicates = {replicates!r} is out of range: allowed 2 <= replicates <= 100")
-    rng = np.random.default_rng(seed)
-    preds = sim.predict(dict(truth), list(conditions))
-    obs = []
-
-    def noisy(mean: float, scale: float) -> Tuple[float, float]:
-        draws = mean + noise * scale * rng.standard_normal(replicates)
-        return float(draws.mean()), float(draws.std(ddof=1))
-
-    for c in conditions:
-        p = preds[c]
-        if not p.ok:
-            raise RuntimeError(f"the truth's simulation of {c.label} failed: {p.error}")
-        x_f = p.scalars.get("dLf_D", float("nan"))
-        if "sigma_1" in quantities and p.curve is not None:
-            x, y = np.asarray(p.curve[0]), np.asarray(p.curve[1])
-            top = float(np.max(y))
-            hi = min(1.6 * x_f, float(x.max()))
-            for xi in np.linspace(0.1 * x_f, hi, points):
-                m, s = noisy(float(np.interp(xi, x, y)), top)
-                obs.append(Observation(c, "sigma_1", float(xi), m, s, replicates, diametral_part(xi, x_f)))
-        if compaction_points and p.compaction is not None:
-            x, y = np.asarray(p.compaction[0]), np.asarray(p.compaction[1])
-            order = np.argsort(x)
-            x, y = x[order], y[order]
-            top = float(np.max(y))
-            for xi in np.linspace(0.3 * x.max(), x.max(), compaction_points):
-                m, s = noisy(float(np.interp(xi, x, y)), top)
-                obs.append(Observation(c, "sigma_z", float(xi), m, s, replicates,
-                                       "compaction-low" if xi < COMPACTION_SPLIT else "compaction-high"))
-        for q in ("sigma_f", "dLf_D", "bulk_density"):
-            if q in quantities and math.isfinite(p.scalars.get(q, float("nan"))):
-                v = p.scalars[q]
-                m, s = noisy(v, abs(v))
-                obs.append(Observation(c, q, float("nan"), m, s, replicates))
-    return Dataset(obs, name)
+def _prediction(rec: dict) -> Prediction:
+    """One run record (pelletdem.worker.run_point) as a Prediction."""
+    if not rec["ok"]:
+        return Prediction(ok=False, error=rec.get("error") or "failed")
+    outs = rec["outputs"]
+    sc = {key: float(outs.get(out, float("nan"))) for key, out in (
+        ("sigma_f", "sigma_f"), ("dLf_D", "dLf_D"), ("bulk_density", "bulk_density_relaxed"),
+        ("coordination_number", "coordination_number_relaxed_bulk"), ("peaked", "peaked"))}
+    curve = rec.get("curve") or {}
+    comp = rec.get("compaction_curve") or {}
+    return Prediction((np.asarray(curve.get("dL_D", []), float), np.asarray(curve.get("sigma_1", []), float)),
+                      (np.asarray(comp.get("dh_h0", []), float), np.asarray(comp.get("sigma_z", []), float)), sc)

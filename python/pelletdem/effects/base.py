@@ -23,7 +23,9 @@ class Effect:
     law fields set with it (e.g. an exponent). ``needs``: condition attribute that must vary in
     the data for the effect to be seen (``"mc"`` for moisture), or ``""``. ``stage``: where it
     acts ('compaction' effects need a new relaxation per value, 'diametral' ones branch off the
-    relaxed pellet). ``signature``: the residual it leaves, for the report.
+    relaxed pellet). ``signature``: the residual it leaves, for the report. ``stronger``:
+    'higher' when the effect grows with its strength, 'lower' when it grows as the strength
+    falls (a Weibull modulus: a small modulus is a wide spread).
     """
 
     name: str
@@ -39,6 +41,7 @@ class Effect:
     signature: str
     fixed: Mapping[str, float] = field(default_factory=dict)
     needs: str = ""
+    stronger: str = "higher"
 
     def __post_init__(self):
         law, _, fname = self.param.partition(".")
@@ -60,6 +63,8 @@ class Effect:
             raise ValueError(f"effect {self.name}: a log-space parameter needs lo > 0")
         if self.stage not in ("compaction", "diametral"):
             raise ValueError(f"effect {self.name}: stage must be 'compaction' or 'diametral'")
+        if self.stronger not in ("higher", "lower"):
+            raise ValueError(f"effect {self.name}: stronger must be 'higher' or 'lower'")
 
     def settings(self, value: float) -> Dict[str, float]:
         """The law fields to set for strength ``value`` (its param plus the fixed ones)."""

@@ -6,4 +6,5 @@ EFFECT = Effect(
     log=True, off=0.0, stage="diametral",
     description="particles crush where the plates touch the pellet: plate contact force capped at p pi r^2",
     signature="toe of sigma_1(dL/D): simulated stress too high at small dL/D, the rise starts "
-              "late in the data; failure at larger dL_f/D with nearly the same peak")
+              "late in the data; failure at larger dL_f/D with nearly the same peak",
+    stronger="lower")

@@ -6,4 +6,5 @@ EFFECT = Effect(
     off=0.0, stage="diametral",
     description="bond strengths spread as a Weibull distribution of modulus m (mean kept)",
     signature="weak bonds break early: the rise bends over before the peak, the peak is lower "
-              "and rounder, and the fall after it gentler; small m is a wide spread")
+              "and rounder, and the fall after it gentler; small m is a wide spread",
+    stronger="lower")

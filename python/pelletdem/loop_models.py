@@ -1,0 +1,186 @@
+"""One model of the discrepancy loop: the baseline, or the baseline with effects switched on.
+
+:func:`fit_model` simulates the model on a space-filling design of its box (every point on
+the same packings, the loop's *fit seeds*), builds its emulator, fits the data on it, and then
+simulates the fitted parameters twice more: on the fit seeds (the residual a person looks at,
+and the pairing for the candidates' probes) and on the *check seeds*, packings used neither in
+the design nor in the fit, on every condition (the held-out test, which a lucky packing
+cannot pass). All simulations go through the simulator's cache, so a design shared by several
+loops (the same box, conditions and seeds) is simulated once.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable, Dict, List, Optional, Sequence, Tuple
+
+import numpy as np
+
+from .loop_data import Condition, Dataset
+from .loop_emulator import Emulator, Space, design
+from .loop_fit import EmulatedFit, fit_emulated, profile, welch_z
+from .loop_simulators import Ensemble, Simulator
+
+__all__ = ["ModelFit", "REFINE_ROUNDS", "design_size", "simulate_design", "local_design", "fit_model",
+           "nested_points", "ensemble_z", "chi2_of"]
+
+
+#: Rounds of refinement of each model's emulator around its fit (at most).
+REFINE_ROUNDS = 3
+
+
+def design_size(dim: int) -> int:
+    """Design points for a box of ``dim`` parameters: 6 per dimension, at least 12."""
+    return max(12, 6 * dim)
+
+
+@dataclass
+class ModelFit:
+    """A fitted model: ``effects`` switched on (names), its box (``space``), ``emulator`` and
+    emulated ``fit``; the fitted parameters simulated on the fit seeds (``direct``) and on the
+    check seeds (``check``), every condition; and the check's misfit z-scores of the fit data
+    (``z_check_fit``) and of the held-out data (``z_check_held``, None without held-out
+    data)."""
+
+    effects: Tuple[str, ...]
+    space: Space
+    emulator: Emulator
+    fit: EmulatedFit
+    direct: Dict[Condition, Ensemble]
+    check: Dict[Condition, Ensemble]
+    z_direct: np.ndarray
+    z_check_fit: np.ndarray
+    z_check_held: Optional[np.ndarray]
+
+    @property
+    def name(self) -> str:
+        """'baseline', or 'baseline + a + b'."""
+        return " + ".join(("baseline",) + self.effects)
+
+    @property
+    def n_params(self) -> int:
+        """Fitted parameters."""
+        return self.space.dim
+
+    def bic(self, n: int) -> float:
+        """chi2 + p ln(n) of the emulated fit on n observations."""
+        return self.fit.chi2 + self.n_params * math.log(max(n, 2))
+
+
+def ensemble_z(ensembles: Dict[Condition, Ensemble], data: Dataset) -> np.ndarray:
+    """Misfit z-scores (-) of ``data`` under directly simulated ensembles: the Welch score
+    (:func:`pelletdem.loop_fit.welch_z`) of ensemble mean - measured mean, with the data's SE
+    (n - 1 degrees of freedom) and the ensemble's (k - 1 for k packings); NaN where a
+    prediction failed."""
+    mse = np.array([ensembles[o.condition].mean_se(o) for o in data.observations]).reshape(len(data), 2)
+    k = np.array([len(ensembles[o.condition].seeds) for o in data.observations], float)
+    z = welch_z(mse[:, 0] - data.values, data.standard_errors, data.dofs, mse[:, 1], k - 1)
+    return np.where(np.isfinite(mse[:, 0]), z, np.nan)
+
+
+def chi2_of(z: np.ndarray) -> float:
+    """sum z^2 over the finite z (inf when any is not finite)."""
+    z = np.asarray(z, float)
+    return float(np.sum(z ** 2)) if np.all(np.isfinite(z)) else math.inf
+
+
+def simulate_design(sim: Simulator, space: Space, data: Dataset, seeds: Sequence[int],
+                    n: Optional[int] = None,
+                    U: Optional[np.ndarray] = None) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(U, Y, SE): the design positions of ``space`` (default its Sobol design of ``n`` points)
+    and the ensemble means and standard errors of every observation of ``data`` there,
+    simulated on ``seeds``."""
+    if U is None:
+        U = design(space.dim, n or design_size(space.dim))
+    conds = data.conditions
+    preds = sim.predict_many([space.params(u) for u in U], conds, tuple(seeds))
+    Y = np.empty((len(U), len(data)))
+    SE = np.empty_like(Y)
+    for k, p in enumerate(preds):
+        for i, o in enumerate(data.observations):
+            Y[k, i], SE[k, i] = p[o.condition].mean_se(o)
+    return U, Y, SE
+
+
+def local_design(space: Space, u: np.ndarray, half_width: float, n: int, seed: int) -> np.ndarray:
+    """``u`` and ``n`` Sobol points of the box of ``half_width`` (unit coordinates) around it,
+    clipped to the model's box: where a refinement of the emulator simulates."""
+    pts = np.clip(u + (design(space.dim, max(n, 2), seed) - 0.5) * 2.0 * half_width, 0.0, 1.0)
+    return np.vstack([u[None, :], pts[:n]])
+
+
+def _emulate(space: Space, U, Y, SE, name: str, warm: Optional[Emulator] = None) -> Emulator:
+    ok = np.all(np.isfinite(Y), axis=1)
+    if not ok.any():
+        raise RuntimeError(f"{name}: every design point's simulation failed")
+    return Emulator(space, U[ok], Y[ok], SE[ok], warm)
+
+
+def fit_model(sim: Simulator, space: Space, effects: Sequence[str], fit_data: Dataset,
+              heldout: Optional[Dataset], fit_seeds: Sequence[int], check_seeds: Sequence[int],
+              start: Optional[Dict[str, float]] = None, n_design: Optional[int] = None,
+              log: Callable[[str], None] = lambda s: None, refine: int = REFINE_ROUNDS,
+              shared: Optional[Tuple[np.ndarray, np.ndarray, np.ndarray]] = None) -> ModelFit:
+    """Design, emulate, fit and check one model (see the module docstring). ``start``: a
+    starting point (SI) for the fit; the design's best points are tried too. ``refine``: at
+    most this many rounds of refinement, each simulating the fitted point and 2 d + 2 points
+    around it (in a box of half-width 0.15, 0.075, ... of the unit box) and fitting again on
+    the richer emulator, until the fit moves less than 0.02 of the box. ``shared``: (U, Y, SE)
+    already simulated in this box on the same packings (the nested model's design, its new
+    axis at the strength that switches the effect off, :func:`nested_points`), which join
+    the emulator without being simulated again."""
+    name = " + ".join(("baseline",) + tuple(effects))
+    U, Y, SE = simulate_design(sim, space, fit_data, fit_seeds, n_design)
+    if shared is not None:
+        U, Y, SE = np.vstack([U, shared[0]]), np.vstack([Y, shared[1]]), np.vstack([SE, shared[2]])
+    emu = _emulate(space, U, Y, SE, name)
+    fit = fit_emulated(emu, fit_data, space.unit(start) if start else None)
+    for r in range(refine):
+        Ul = local_design(space, fit.u, 0.15 / 2 ** r, 2 * space.dim + 2, seed=r + 1)
+        _, Yl, SEl = simulate_design(sim, space, fit_data, fit_seeds, U=Ul)
+        U, Y, SE = np.vstack([U, Ul]), np.vstack([Y, Yl]), np.vstack([SE, SEl])
+        emu = _emulate(space, U, Y, SE, name, emu)
+        new = fit_emulated(emu, fit_data, fit.u)
+        moved = float(np.max(np.abs(new.u - fit.u)))
+        fit = new
+        if moved < 0.02:
+            break
+    if effects:
+        profile(emu, fit_data, fit, space.names[-1])  # the candidate's strength, added last
+    failed = ~np.all(np.isfinite(Y), axis=1)
+    conds = fit_data.conditions + (heldout.conditions if heldout is not None else [])
+    direct = sim.predict(fit.params, conds, tuple(fit_seeds))
+    check = sim.predict(fit.params, conds, tuple(check_seeds))
+    z_held = ensemble_z(check, heldout) if heldout is not None else None
+    mf = ModelFit(tuple(effects), space, emu, fit, direct, check, ensemble_z(direct, fit_data),
+                  ensemble_z(check, fit_data), z_held)
+    log(f"{name}: {len(U)} design points ({int(failed.sum())} failed), emulated chi2/n "
+        f"{fit.chi2_per_point:.2f} at " + ", ".join(f"{k} = {fit.params[k]:.4g}" for k in space.names)
+        + f"; fresh packings: chi2/n {chi2_of(mf.z_check_fit) / len(fit_data):.2f} fit"
+        + (f", {chi2_of(z_held) / len(heldout):.2f} held out" if heldout is not None else ""))
+    return mf
+
+
+def nested_points(mf: ModelFit, off_unit: float) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The design of ``mf`` (U, Y, SE) as points of a box with one more axis, at unit position
+    ``off_unit`` on it: the model with a candidate effect switched off is ``mf`` itself."""
+    e = mf.emulator
+    return np.column_stack([e.U, np.full(len(e.U), float(off_unit))]), e.Y, e.SE
+
+
+def unit_jacobian(mf: ModelFit, fit_data: Dataset, h: float = 1e-3) -> np.ndarray:
+    """d(emulated mean)/du at the fitted position, one column per axis (outputs' units per unit
+    of the box), by central differences on the emulator."""
+    u0 = mf.fit.u
+    cols: List[np.ndarray] = []
+    for k in range(len(u0)):
+        up, dn = u0.copy(), u0.copy()
+        up[k] = min(1.0, u0[k] + h)
+        dn[k] = max(0.0, u0[k] - h)
+        mp, _ = mf.emulator.predict(up[None, :])
+        md, _ = mf.emulator.predict(dn[None, :])
+        cols.append((mp[0] - md[0]) / max(up[k] - dn[k], 1e-12))
+    return np.array(cols).T
+
+
+__all__ += ["unit_jacobian"]

@@ -1,0 +1,70 @@
+"""Fitting on the emulator, and the Welch scores it minimises (pelletdem.loop_fit)."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from pelletdem.loop import Condition, Dataset, Observation
+from pelletdem.loop_emulator import Axis, Emulator, Space, design
+from pelletdem.loop_fit import fit_emulated, welch_z
+
+
+def test_welch_z_is_the_t_statistic_when_both_errors_are_well_known():
+    z = welch_z([0.0, 1.0, -3.0], [1.0, 1.0, 1.0], 1e6, [0.0, 0.0, 0.0], 1e6)
+    assert z == pytest.approx([0.0, 1.0, -3.0], abs=1e-4)
+
+
+def test_welch_z_discounts_a_difference_measured_against_a_five_replicate_sd():
+    # t = 3 with 4 degrees of freedom has the tail of z = 2.25, not 3
+    z = float(welch_z(3.0, 1.0, 4, 0.0, 1e6))
+    assert z == pytest.approx(stats.norm.isf(stats.t.sf(3.0, 4)), rel=1e-6)
+    assert 2.0 < z < 2.5
+    # Welch-Satterthwaite: two equal errors with 4 dof each give 8 dof
+    assert float(welch_z(3.0, 1.0, 4, 1.0, 4)) == pytest.approx(stats.norm.isf(stats.t.sf(3.0 / math.sqrt(2), 8)))
+
+
+def test_welch_z_squared_sums_to_a_chi_square_under_noise():
+    rng = np.random.default_rng(1)
+    n, reps = 4000, 5
+    x = rng.standard_normal((n, reps))
+    se = x.std(axis=1, ddof=1) / math.sqrt(reps)
+    z = welch_z(x.mean(axis=1), se, reps - 1, 0.0, 1e6)
+    assert np.mean(z ** 2) == pytest.approx(1.0, abs=0.08)  # the raw t^2 would average 2
+
+
+def _emulator_and_data(truth_u, noise=0.01):
+    """An emulator of sigma_f = 1 MPa exp(u0 - 0.3 u1) and dL_f/D = 0.05 (1 + u1 - 0.5 u0),
+    and data made at ``truth_u``."""
+    space = Space((Axis("E_b", 1e7, 1e9), Axis("sigma_c", 1e6, 1e8)))
+    f = lambda U: np.column_stack([1e6 * np.exp(U[:, 0] - 0.3 * U[:, 1]),  # noqa: E731
+                                   0.05 * (1 + U[:, 1] - 0.5 * U[:, 0])])
+    U = design(2, 20)
+    Y = f(U)
+    emu = Emulator(space, U, Y, Y * 0.005)
+    y = f(np.atleast_2d(truth_u))[0]
+    c = Condition(120e6)
+    data = Dataset([Observation(c, "sigma_f", math.nan, y[0], noise * y[0] * math.sqrt(5), 5),
+                    Observation(c, "dLf_D", math.nan, y[1], noise * y[1] * math.sqrt(5), 5)])
+    return space, emu, data
+
+
+def test_fit_emulated_recovers_the_parameters_and_their_uncertainty():
+    truth = np.array([0.3, 0.6])
+    space, emu, data = _emulator_and_data(truth)
+    fit = fit_emulated(emu, data, start=[0.8, 0.1])
+    assert fit.u == pytest.approx(truth, abs=0.01)
+    assert fit.chi2 < 1e-3
+    p = space.params(truth)
+    for name in ("E_b", "sigma_c"):
+        lo, hi = fit.interval(name)
+        assert lo < p[name] < hi
+        assert 0 < fit.se[name] < 0.2  # relative (log axes)
+
+
+def test_fit_emulated_needs_the_emulators_outputs():
+    _, emu, data = _emulator_and_data(np.array([0.5, 0.5]))
+    with pytest.raises(ValueError, match="outputs"):
+        fit_emulated(emu, Dataset(data.observations[:1]))

@@ -1,0 +1,149 @@
+"""Forward selection on data made like a laboratory's (pelletdem.loop_selection).
+
+The analytic pellet of toy_pellet.py scatters between packings as the DEM pellet does; the
+data's five replicates come from packings no fit uses, with 2 % noise, and 90 MPa is held
+out. The loop must name a hidden effect it knows and recover its strength, add nothing to
+data without one, say "no candidate explains" an effect outside its library, and not let a
+compaction-stage effect win by re-packing.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from toy_pellet import BOUNDS, FIT, HELD, LIBRARY, START, TRUTH, toy
+
+from conftest import toy_loop
+from pelletdem.loop import FunctionSimulator, Prediction, close_loop, synthetic_dataset
+from pelletdem.loop_selection import unfailed
+
+HIDDEN = {"toe": 0.5, "tail": 1.0, "trend": 1.0, "springback": 10.0}
+
+
+@pytest.mark.parametrize("name", sorted(HIDDEN))
+@pytest.mark.parametrize("draw", [0, 1])
+def test_loop_names_the_hidden_effect_and_recovers_its_strength(name, draw):
+    e = LIBRARY[name]
+    res = toy_loop(e.settings(HIDDEN[name]), draw)
+    assert res.chosen[:1] == [name], res.verdict + "\n" + "\n".join(res.log)
+    model = res.steps[0].trials[[t.effect.name for t in res.steps[0].trials].index(name)].model
+    # the profile's 3-sigma interval (the 2-sigma one's coverage rate over many draws is what
+    # benchmarks/bench_loop_acceptance.py measures; two draws cannot)
+    lo, hi = model.fit.interval(e.param, k=3.0)
+    assert lo <= HIDDEN[name] <= hi, (lo, hi)
+    before, after = res.errors["baseline"], res.errors[f"baseline + {name}"]
+    assert after["fit_rrmse"] < before["fit_rrmse"]
+    # the held-out conditions do not get worse beyond their noise (the loop's own rule)
+    n_held = len(res.heldout_data)
+    assert after["heldout_chi2_per_point"] <= before["heldout_chi2_per_point"] + 2 * math.sqrt(2 * n_held) / n_held
+
+
+@pytest.mark.parametrize("draw", [0, 1, 2, 3])
+def test_loop_adds_nothing_without_an_effect(draw):
+    res = toy_loop({}, draw)
+    assert res.chosen == [], res.verdict + "\n" + "\n".join(res.log)
+    assert res.final is res.baseline
+    assert res.errors["baseline"]["heldout_chi2_per_point"] < 2.5
+
+
+@pytest.mark.parametrize("draw", [0, 1])
+def test_an_effect_outside_the_library_is_not_explained(draw):
+    res = toy_loop({"bond.kt_ratio": 1.3}, draw)
+    assert res.chosen == [] and res.verdict == "no candidate explains this residual", "\n".join(res.log)
+    assert res.errors["baseline"]["fit_chi2_per_point"] > 3  # there was something to explain
+    assert set(res.power) == set(LIBRARY)  # and the report says what could have been seen
+
+
+def test_a_compaction_effect_does_not_win_by_repacking():
+    # With every candidate fitted in full, the compaction-stage one (which re-draws the
+    # packings at every strength, as a DEM compaction does) may lower the fit's chi2 by luck;
+    # the check on fresh packings must refuse it on data without an effect.
+    for draw in (0, 1):
+        res = toy_loop({}, draw, screen_threshold=0.0, screen_top=4)
+        assert res.chosen == [], "\n".join(res.log)
+
+
+def test_every_step_is_reported():
+    res = toy_loop(LIBRARY["tail"].settings(1.0), 0)
+    first = res.steps[0]
+    assert first.model is res.baseline and first.added == "tail"
+    assert [s.effect.name for s in first.screens][0] == "tail"
+    assert all(math.isfinite(s.gain) for s in first.screens if not s.skipped)
+    assert res.steps[-1].added is None
+    assert "baseline + tail" in res.table()
+    assert res.n_simulations > 0 and res.wall_time_s > 0
+
+
+def test_bad_arguments_are_refused_before_any_simulation():
+    sim = FunctionSimulator(toy)
+    data = synthetic_dataset(sim, TRUTH, FIT + HELD, noise=0.02)
+    n0 = sim.n_simulations
+    for kw, match in (({"fit_seeds": (0, 1), "check_seeds": (1, 2)}, "disjoint"), ({"alpha": 0.0}, "alpha"),
+                      ({"min_check_gain": 1.5}, "min_check_gain"), ({"max_effects": -1}, "max_effects")):
+        with pytest.raises(ValueError, match=match):
+            close_loop(sim, data, BOUNDS, START, held_out=lambda c: c in HELD, library=LIBRARY, **kw)
+    with pytest.raises(ValueError, match="E_b"):
+        close_loop(sim, data, {"E_b": (1e9, 1e6)}, None, library=LIBRARY)
+    with pytest.raises(ValueError, match="start"):
+        close_loop(sim, data, BOUNDS, {"E_b": 1.0, "sigma_c": 8e6}, library=LIBRARY)
+    with pytest.raises(ValueError, match="held out"):
+        close_loop(sim, data, BOUNDS, START, held_out=lambda c: True, library=LIBRARY)
+    assert sim.n_simulations == n0
+
+
+class WindowedToy(FunctionSimulator):
+    """The toy pellet seen through a diametral test that ends at ``max_dLD``: past its end
+    the curve is cut, and a pellet that has not failed by then has not peaked."""
+
+    def __init__(self, max_dLD):
+        self.max_dLD = max_dLD
+        super().__init__(self._run)
+
+    def _run(self, params, c, seed):
+        p = toy(params, c, seed)
+        x, y = p.curve
+        keep = x <= self.max_dLD
+        k = int(np.argmax(y[keep]))
+        peaked = 1.0 if p.scalars["dLf_D"] <= self.max_dLD else 0.0
+        return Prediction(curve=(x[keep], y[keep]), compaction=p.compaction,
+                          scalars=dict(p.scalars, sigma_f=float(y[keep][k]), dLf_D=float(x[keep][k]), peaked=peaked))
+
+    def widen(self, max_dLD):
+        self.max_dLD = max_dLD
+        self._memo.clear()
+
+
+def test_a_window_shorter_than_the_data_is_widened_before_the_fit():
+    # the data (a laboratory's) break near dL/D = 0.08 and reach 0.12; the model's test ends at 0.05
+    data = synthetic_dataset(WindowedToy(0.5), TRUTH, FIT + HELD, noise=0.02, compaction_points=4)
+    sim = WindowedToy(0.05)
+    res = close_loop(sim, data, BOUNDS, START, held_out=lambda c: c in HELD, library=LIBRARY, max_effects=0)
+    assert sim.max_dLD > 0.12
+    assert any("the tests run to dL/D" in line for line in res.log)
+    assert not unfailed(res.baseline, res.fit_data)
+    assert res.baseline.fit.params["E_b"] == pytest.approx(TRUTH["E_b"], rel=0.2)
+
+
+def test_a_fitted_model_that_does_not_fail_gets_a_wider_window():
+    # data without curve points past dL/D 0.02 (their dL_f/D is not given): the window first
+    # holds them, but the model fitted to them does not fail inside it
+    full = synthetic_dataset(WindowedToy(0.5), TRUTH, FIT + HELD, noise=0.02, compaction_points=4)
+    data = full.subset(lambda o: o.quantity not in ("dLf_D",) and not (o.quantity == "sigma_1" and o.x > 0.02))
+    sim = WindowedToy(0.03)
+    res = close_loop(sim, data, BOUNDS, START, held_out=lambda c: c in HELD, library=LIBRARY, max_effects=0)
+    assert sim.max_dLD > 0.03
+    assert any("does not fail within the test window" in line for line in res.log)
+
+
+def test_synthetic_data_refuse_replicates_that_do_not_break():
+    with pytest.raises(ValueError, match="do not fail within"):
+        synthetic_dataset(WindowedToy(0.03), TRUTH, FIT, noise=0.02)
+
+
+def test_a_simulator_that_cannot_widen_says_so_in_the_verdict():
+    data = synthetic_dataset(WindowedToy(0.5), TRUTH, FIT + HELD, noise=0.02)
+    sim = WindowedToy(0.05)
+    sim.widen = None  # a simulator that cannot widen its window
+    res = close_loop(sim, data, BOUNDS, START, held_out=lambda c: c in HELD, library=LIBRARY, max_effects=0)
+    assert "beyond the simulated test window" in res.verdict
