@@ -62,31 +62,12 @@ def test_pellet_life_example_runs(tmp_path):
     assert summary["sigma_f_mpa"] > 0
 
 
-def test_calibration_sittings_add_up(tmp_path):
-    """03_calibration.py's wall time over sittings: a finished sitting counts start to end, a
-    killed one (no end line) start to its last cache record before the next start."""
-    import importlib.util
-    import os
-    import types
-
-    spec = importlib.util.spec_from_file_location("ex03", ROOT / "examples" / "03_calibration.py")
-    ex03 = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(ex03)
-    (tmp_path / "cache" / "ab").mkdir(parents=True)
-    rows = [{"time": 1000.0, "event": "start"},                       # killed after 2 records
-            {"time": 5000.0, "event": "start"},                       # finished
-            {"time": 5600.0, "event": "end", "n_simulations": 3, "n_cached": 2}]
-    (tmp_path / "segments.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
-    for name, t in (("a", 1500.0), ("b", 1900.0), ("c", 5300.0)):
-        f = tmp_path / "cache" / "ab" / f"{name}.json"
-        f.write_text("{}")
-        os.utime(f, (t, t))
-    log = ex03._segments_log(tmp_path)
-    log.start()  # a third sitting, which ends at once
-    out = log.finish(types.SimpleNamespace(n_simulations=0, n_cached=5))
-    s = out["sittings"]
-    assert [x["killed"] for x in s] == [True, False, False]
-    assert s[0]["wall_time_s"] == 900.0 and s[0]["n_simulations"] == 2
-    assert s[1]["wall_time_s"] == 600.0 and s[1]["n_simulations"] == 3
-    assert 0.0 <= s[2]["wall_time_s"] < 60.0
-    assert out["wall_time_total_s"] == sum(x["wall_time_s"] for x in s)
+def test_calibration_example_checks_its_arguments_as_the_command_line_does(tmp_path):
+    """03_calibration.py is `pelletdem calibrate` with the file's size knobs as defaults: a bad
+    argument is refused, naming it, before any work."""
+    out = tmp_path / "ex03"
+    run = subprocess.run([sys.executable, str(ROOT / "examples" / "03_calibration.py"), str(out), "--max-runs", "0"],
+                         capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    assert run.returncode == 2
+    assert "--max-runs = 0 is out of range: allowed 1..100" in run.stderr
+    assert not out.exists()

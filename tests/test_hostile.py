@@ -424,10 +424,13 @@ def test_measured_tables_and_variants(n, material, mc, sigma_z):
 
 # --- the command line -------------------------------------------------------------------------------
 
-ARG_WORDS = ["run", "loop", "--preset", "tiny", "quick", "paper", "huge", "--out", "o", "--material", "oak", "teak",
-             "--mc", "8", "20", "--sigma-z", "60", "120", "--seed", "-1", "0", "1.5", "99999999999999999999",
-             "--threads", "0", "1", "2", "1e9", "--particles", "5", "-5", "0", "--quiet", "--restart",
-             "--checkpoint-interval", "nan", "inf", "-1", "1e400", "--help-me", "", "--", "-"]
+ARG_WORDS = ["run", "loop", "calibrate", "--preset", "tiny", "quick", "paper", "huge", "--out", "o", "--material",
+             "oak", "teak", "--mc", "8", "20", "--sigma-z", "60", "120", "--seed", "-1", "0", "1.5",
+             "99999999999999999999", "--threads", "0", "1", "2", "1e9", "--particles", "5", "-5", "0", "--quiet",
+             "--restart", "--checkpoint-interval", "nan", "inf", "-1", "1e400", "--help-me", "", "--", "-",
+             # calibrate's own options
+             "--variant", "--max-runs", "--compaction-runs", "--workers", "--from", ".", "--dask", "tcp://x:1",
+             "--set", "contact.mu=0.4", "contact.mu=-1", "bond.sigma_c=9e6", "bond.softening=nan", "k1=1"]
 
 
 class _NoRun(Exception):
@@ -441,12 +444,16 @@ def test_cli_argv(argv):
     def no_run(*a, **k):
         raise _NoRun
 
-    from pelletdem import loop_cli
+    import distributed
+
+    from pelletdem import calibration_dir, loop_cli
 
     saved, saved_loop, cwd = pipeline.run_pellet, loop_cli.run, os.getcwd()
+    saved_calibrate, saved_client = calibration_dir.calibrate_into, distributed.Client
     with tempfile.TemporaryDirectory() as d:
         os.chdir(d)
-        pipeline.run_pellet = loop_cli.run = no_run  # parsing and checks only, no simulation
+        # parsing and checks only: no simulation, no calibration, no Dask scheduler
+        pipeline.run_pellet = loop_cli.run = calibration_dir.calibrate_into = distributed.Client = no_run
         try:
             code = cli.main(argv)
             assert isinstance(code, int)
@@ -456,4 +463,5 @@ def test_cli_argv(argv):
             pass
         finally:
             pipeline.run_pellet, loop_cli.run = saved, saved_loop
+            calibration_dir.calibrate_into, distributed.Client = saved_calibrate, saved_client
             os.chdir(cwd)

@@ -8,7 +8,10 @@ values of Table 3 are compared only where the variant has them.
 The run is checkpointed to DIR/checkpoint.h5 at every stage end and every
 --checkpoint-interval seconds inside a stage; the same command again on the same DIR resumes
 from the last checkpoint (a killed run ends with the same bits as one never stopped), other
-arguments are refused, and --restart starts afresh."""
+arguments are refused, and --restart starts afresh.
+
+`pelletdem calibrate OUT_DIR` fits the paper's variants to its Tables 2 and 3 (calibrate_cli.py)
+and `pelletdem loop` runs the discrepancy loop (loop_cli.py)."""
 from __future__ import annotations
 
 import argparse
@@ -147,15 +150,22 @@ def main(argv=None) -> int:
                         "one is written at every stage end too (default 300)")
     r.add_argument("--restart", action="store_true",
                    help="discard DIR's checkpoint and start again (by default a run resumes from it)")
-    from . import loop_cli
+    from . import calibrate_cli, loop_cli
 
     loop_cli.add_parser(sub)
+    calibrate_cli.add_parser(sub)
     args = ap.parse_args(argv)
     if args.command == "loop":
         try:
             return loop_cli.run(args)
         except (ValueError, RuntimeError) as e:  # a bad argument or data file, named before any work
             print(f"pelletdem loop: error: {e}", file=sys.stderr)
+            return 2
+    if args.command == "calibrate":
+        try:
+            return calibrate_cli.run(args)
+        except (ValueError, OSError) as e:  # a bad argument, before any work; an unwritable OUT_DIR
+            print(f"pelletdem calibrate: error: {e}", file=sys.stderr)
             return 2
     if args.command == "run":
         if not args.out.strip() or (os.path.exists(args.out) and not os.path.isdir(args.out)):

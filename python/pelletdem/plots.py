@@ -236,3 +236,52 @@ def calibration_parameter_map(points, x: str = "E_b", y: str = "sigma_c", value:
     ax.set_ylabel(f"{y} (MPa)")
     fig.tight_layout()
     return fig
+
+
+def calibration_curves(report, variants, records, ax=None):
+    """Fig. 15 for a calibration: each variant's simulated sigma_1(dL/D) (MPa) at its fitted
+    bonds (lines) with Table 3's sigma_f and dL_f/D (squares, mean +- SD), one panel per
+    material. `report` is a calibrate.CalibrationReport, `variants` its variants (measured
+    Variants), `records` the run cache's records (the curves are read from them)."""
+    plt = _plt()
+    mats = sorted({v.material for v in variants})
+    if ax is None:
+        fig, axs = plt.subplots(1, len(mats), figsize=(5 * len(mats), 4), squeeze=False)
+        axs = axs[0]
+    else:
+        axs = np.atleast_1d(ax)
+        fig = axs[0].figure
+    diametral = [r for r in records if r and r["ok"] and r["spec"].get("kind") == "diametral"]
+    for panel, mat in zip(axs, mats):
+        for k, v in enumerate(x for x in variants if x.material == mat):
+            p = report.fits[v.label].params
+            for rec in diametral:
+                s = rec["spec"]
+                if (np.isclose(s["sigma_z"], v.sigma_z) and np.isclose(s["bond"]["youngs_modulus"], p["E_b"])
+                        and np.isclose(s["bond"]["sigma_c"], p["sigma_c"])):
+                    panel.plot(rec["curve"]["dL_D"], np.asarray(rec["curve"]["sigma_1"]) / 1e6, color=f"C{k}",
+                               label=f"MC {v.mc_percent} %, {v.sigma_z_mpa} MPa")
+                    break
+            panel.errorbar([v.dLf_D], [v.sigma_f / 1e6], xerr=[v.dLf_D_sd], yerr=[v.sigma_f_sd / 1e6], fmt="s",
+                           color=f"C{k}", mec="k", capsize=3)
+        panel.set_title(f"{mat}: DEM (lines), Table 3 (squares)")
+        panel.set_xlabel("$\\Delta L/D$")
+        panel.set_ylabel("$\\sigma_1$ (MPa)")
+        panel.legend(fontsize=7)
+    fig.tight_layout()
+    return fig
+
+
+def save_calibration(report, variants, records, directory: str) -> list:
+    """Write a calibration's figures as PNG files into `directory` (Fig. 15 as measured against
+    simulated, :func:`calibration_measured_vs_simulated`, and as curves,
+    :func:`calibration_curves`); returns the paths."""
+    plt = _plt()
+    out = []
+    for name, fig in (("fig15_measured_vs_simulated.png", calibration_measured_vs_simulated(report)),
+                      ("fig15_curves.png", calibration_curves(report, variants, records))):
+        path = os.path.join(directory, name)
+        fig.savefig(path, dpi=120)
+        plt.close(fig)
+        out.append(path)
+    return out

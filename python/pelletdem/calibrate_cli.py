@@ -1,0 +1,165 @@
+"""`pelletdem calibrate OUT_DIR`: the paper's calibration of its 12 variants from the command line.
+
+    pelletdem calibrate OUT_DIR                                    # tiny, all 12 variants: minutes
+    pelletdem calibrate OUT_DIR --variant oak 8 120 --max-runs 2   # one variant
+    pelletdem calibrate QUICK --preset quick --compaction-runs 6 --max-runs 8       # ~20 min, 2 cores
+    pelletdem calibrate PAPER --preset paper --max-runs 8 --from QUICK --dask HOST:8786   # hours
+
+One shared loading stiffness k1 against Table 2's pellet densities, then E_b and sigma_c per
+variant against Table 3's sigma_f and dL_f/D. Writes calibration.csv, calibration.json and the
+Fig. 15 plots into OUT_DIR (pelletdem.calibration_dir). Every run is cached in OUT_DIR/cache:
+the same command again resumes where a stopped one ended and runs nothing twice. --from DIR
+starts from an earlier calibration (its k1 and bond fits, on a smaller preset) in place of
+the compaction fit and Table 5's values. Every argument is checked before any simulation.
+"""
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import math
+import os
+from typing import Optional
+
+#: Default points per variant's bond fit and of the shared compaction fit (0: keep the
+#: preset's k1): 'tiny' with these takes a few minutes on two cores.
+MAX_RUNS = 4
+COMPACTION_RUNS = 2
+#: Allowed ranges of the counts, inclusive.
+LIMITS = {"max_runs": (1, 100), "compaction_runs": (0, 100), "workers": (1, 256)}
+#: Bond-law parameters the calibration fits, so --set cannot fix them (tau_c follows sigma_c).
+FITTED = {"bond.youngs_modulus": "E_b", "bond.sigma_c": "sigma_c", "bond.tau_c": "tau_c = sigma_c"}
+
+
+def add_arguments(p: argparse.ArgumentParser, *, preset: str = "tiny", max_runs: int = MAX_RUNS,
+                  compaction_runs: int = COMPACTION_RUNS, workers: Optional[int] = None) -> None:
+    """Add the calibration's arguments (OUT_DIR and options, with these defaults) to ``p``;
+    shared by the `calibrate` subcommand and examples/03_calibration.py."""
+    workers = workers or min(2, os.cpu_count() or 1)
+    p.add_argument("out", metavar="OUT_DIR", help="output directory (created; its cache/ makes a rerun resume)")
+    p.add_argument("--preset", default=preset, choices=["tiny", "quick", "paper"],
+                   help=f"pellet size (default {preset})")
+    p.add_argument("--variant", nargs=3, action="append", default=None, metavar=("MATERIAL", "MC", "PRESSURE_MPA"),
+                   help="calibrate only this variant, e.g. oak 8 120 (birch/oak/pine, MC 8 or 20 %%, "
+                        "60 or 120 MPa; repeatable; default all 12)")
+    p.add_argument("--max-runs", type=int, default=max_runs, metavar="N",
+                   help=f"parameter points per variant's bond fit (1..100; default {max_runs})")
+    p.add_argument("--compaction-runs", type=int, default=compaction_runs, metavar="N",
+                   help=f"k1 points of the shared compaction fit (0..100, 0: keep the preset's k1; "
+                        f"default {compaction_runs})")
+    p.add_argument("--from", dest="source", default=None, metavar="DIR",
+                   help="OUT_DIR of an earlier calibration: its k1 and bond fits are the start here")
+    p.add_argument("--workers", type=int, default=workers, metavar="N",
+                   help=f"local worker processes (1..256; default {workers})")
+    p.add_argument("--dask", default=None, metavar="ADDRESS",
+                   help="run the simulations on this Dask scheduler (e.g. tcp://host:8786; needs distributed)")
+    p.add_argument("--set", action="append", default=[], metavar="LAW.NAME=VALUE",
+                   help="set a contact or bond law parameter, e.g. contact.mu=0.4 (SI units; repeatable; "
+                        "not the fitted bond.youngs_modulus, bond.sigma_c, bond.tau_c)")
+
+
+def add_parser(sub) -> None:
+    """Register the `calibrate` subcommand on an argparse subparsers object."""
+    p = sub.add_parser("calibrate", help="fit the bonds (and k1) of the paper's variants to Tables 2 and 3",
+                       description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    add_arguments(p)
+
+
+def _number(text: str, what: str, allowed) -> int:
+    try:
+        v = float(text)
+    except ValueError:
+        v = math.nan
+    if not (math.isfinite(v) and v.is_integer() and int(v) in allowed):
+        raise ValueError(f"{what} = {text!r} is not allowed: allowed {' or '.join(map(str, allowed))}")
+    return int(v)
+
+
+def parse_variants(items):
+    """The measured Variants of ``--variant MATERIAL MC PRESSURE_MPA`` triples (None: all 12);
+    ValueError naming the first unknown or repeated one and the allowed values."""
+    from .measured import COMPACTION_PRESSURES_MPA, MATERIALS, MOISTURE_CONTENTS_PERCENT, variant
+
+    if not items:
+        return None
+    out = []
+    for m, mc, sz in items:
+        where = f"--variant {m} {mc} {sz}"
+        if m not in MATERIALS:
+            raise ValueError(f"{where}: MATERIAL = {m!r} is unknown: allowed {', '.join(MATERIALS)}")
+        v = variant(m, _number(mc, f"{where}: MC (%)", MOISTURE_CONTENTS_PERCENT),
+                    _number(sz, f"{where}: PRESSURE_MPA", COMPACTION_PRESSURES_MPA))
+        if v.key in [x.key for x in out]:
+            raise ValueError(f"{where}: given twice")
+        out.append(v)
+    return out
+
+
+def check(args) -> dict:
+    """The keyword arguments of :func:`pelletdem.calibration_dir.calibrate_into` for ``args``;
+    ValueError naming the first bad argument and its allowed range, before any work."""
+    from .calibration_dir import load_calibration
+    from .law_settings import apply_settings, parse_settings
+    from .laws import BondLaw
+    from .presets import get_preset
+    from .runs import make_spec
+
+    out = str(args.out)
+    if not out.strip() or (os.path.exists(out) and not os.path.isdir(out)):
+        raise ValueError(f"OUT_DIR = {out!r} must name a directory (it is empty or an existing file)")
+    for name, (lo, hi) in LIMITS.items():
+        v = getattr(args, name)
+        if not lo <= v <= hi:
+            raise ValueError(f"--{name.replace('_', '-')} = {v} is out of range: allowed {lo}..{hi}")
+    variants = parse_variants(args.variant)
+    settings = parse_settings(args.set)
+    for name in settings:
+        if name in FITTED:
+            raise ValueError(f"--set {name}: the calibration fits {FITTED[name]} per variant; "
+                             f"allowed: the other bond parameters and any contact.X")
+    preset = get_preset(args.preset)
+    contact, _ = apply_settings(preset.contact, BondLaw(), settings)
+    if args.source is not None:
+        try:
+            src = load_calibration(args.source)
+        except ValueError as e:
+            raise ValueError(f"--from {e}") from None
+        fixed = sorted(f"contact.{k}" for k in src["contact"] if f"contact.{k}" in settings)
+        if fixed:
+            raise ValueError(f"--set {', '.join(fixed)} with --from {args.source}: the contact law's "
+                             f"{', '.join(src['contact'])} come from that calibration")
+        try:
+            make_spec({}, preset=preset.with_(contact=contact), diametral=False, contact=src["contact"])
+        except (ValueError, TypeError) as e:
+            raise ValueError(f"--from {args.source}: its contact law is refused: {e}") from None
+    if args.dask is not None:
+        if not args.dask.strip():
+            raise ValueError("--dask ADDRESS is empty: give the scheduler's address, e.g. tcp://host:8786")
+        if importlib.util.find_spec("distributed") is None:
+            raise ValueError("--dask needs Dask's distributed package, which is not installed: "
+                             "pip install distributed")
+    return dict(variants=variants, preset=args.preset, max_runs=args.max_runs,
+                compaction_runs=args.compaction_runs, source=args.source, settings=settings,
+                max_workers=args.workers)
+
+
+def run(args) -> int:
+    """Run `pelletdem calibrate` with parsed ``args``; returns the exit status. ValueError
+    (a bad argument, before any work) or OSError (OUT_DIR not writable, no Dask scheduler at
+    the address) say what is wrong."""
+    from . import calibration_dir
+
+    kw = check(args)
+    client = None
+    if args.dask is not None:
+        from distributed import Client
+
+        try:
+            client = Client(args.dask)
+        except OSError as e:  # no scheduler there (after distributed's connect timeout)
+            raise OSError(f"--dask {args.dask}: {e}") from None
+    try:
+        calibration_dir.calibrate_into(args.out, executor=client, **kw)
+    finally:
+        if client is not None:
+            client.close()
+    return 0

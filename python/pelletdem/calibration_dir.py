@@ -1,0 +1,149 @@
+"""A calibration of the paper's variants written to a directory, resumable: :func:`calibrate_into`.
+
+What ``pelletdem calibrate OUT_DIR`` and ``examples/03_calibration.py OUT_DIR`` run. OUT_DIR gets
+calibration.csv (the fitted values beside Table 5 and the errors against Tables 2 and 3),
+calibration.json (the contact law, the bond fits, the ``--set`` values, runs and wall time),
+fig15_measured_vs_simulated.png and fig15_curves.png (each variant's fitted sigma_1(dL/D) with
+Table 3's point). OUT_DIR/cache holds one record per run and OUT_DIR/relaxed the relaxed
+pellets the bond runs branch off, so the same calibration run again reads its runs back
+instead of simulating them. OUT_DIR/segments.jsonl marks the start and end of every sitting
+(:class:`Sittings`): calibration.json's ``sittings`` and ``wall_time_total_s`` add up the wall
+time of all of them, killed ones included (up to their last finished run, a lower bound).
+"""
+from __future__ import annotations
+
+import json
+import os
+import time
+from pathlib import Path
+from typing import Callable, Mapping, Optional, Union
+
+from .law_settings import apply_settings
+from .laws import BondLaw
+from .objectives import as_variants
+from .run_cache import RunCache
+from .runs import PARAMETERS, RunSpec, as_preset, check_positive
+from .variants import CalibrationReport, calibrate_variants
+from .worker import run_point
+
+__all__ = ["CALIBRATION_FILE", "Sittings", "load_calibration", "calibrate_into"]
+
+#: The file in OUT_DIR another calibration starts from (``source=``, ``--from``).
+CALIBRATION_FILE = "calibration.json"
+
+
+class Sittings:
+    """Wall time of a calibration that ran in several sittings: ``out/segments.jsonl`` holds a
+    line at each start and end. A sitting that was killed has no end line; its end is taken as
+    the last cache record (``out/cache``) written before the next start (a lower bound: the
+    runs in flight when it was killed are not counted)."""
+
+    def __init__(self, out: Union[str, os.PathLike]):
+        out = Path(out)
+        self.path, self.cache = out / "segments.jsonl", out / "cache"
+
+    def _append(self, **row):
+        with open(self.path, "a") as fh:
+            fh.write(json.dumps({"time": time.time(), **row}) + "\n")
+
+    def start(self) -> None:
+        """Marks the start of a sitting (wall clock, s since the epoch)."""
+        self._append(event="start")
+
+    def finish(self, report) -> dict:
+        """Marks the end; returns calibration.json's fields on every sitting and their sum (s)."""
+        self._append(event="end", n_simulations=report.n_simulations, n_cached=report.n_cached)
+        rows = [json.loads(line) for line in self.path.read_text().splitlines() if line.strip()]
+        mtimes = sorted(f.stat().st_mtime for f in self.cache.rglob("*.json"))
+        sittings = []
+        for k, row in enumerate(rows):
+            if row["event"] != "start":
+                continue
+            nxt = rows[k + 1] if k + 1 < len(rows) else None
+            if nxt is not None and nxt["event"] == "end":
+                sittings.append({"start": row["time"], "wall_time_s": nxt["time"] - row["time"],
+                                 "killed": False, "n_simulations": nxt["n_simulations"]})
+            else:  # killed: it ran until its last record, at least
+                stop = nxt["time"] if nxt is not None else float("inf")
+                done = [t for t in mtimes if row["time"] <= t < stop]
+                sittings.append({"start": row["time"], "wall_time_s": (max(done) - row["time"]) if done else 0.0,
+                                 "killed": True, "n_simulations": len(done)})
+        return {"sittings": sittings, "wall_time_total_s": sum(s["wall_time_s"] for s in sittings)}
+
+
+def load_calibration(directory: Union[str, os.PathLike]) -> dict:
+    """The calibration.json an earlier :func:`calibrate_into` wrote to ``directory``, checked
+    to hold the contact law and the bond fits; ValueError saying what is missing."""
+    path = Path(directory) / CALIBRATION_FILE
+    if not path.is_file():
+        raise ValueError(f"{directory}: no {CALIBRATION_FILE} there (write one with pelletdem calibrate)")
+    try:
+        source = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+        raise ValueError(f"{path}: not a readable calibration ({e})") from None
+    if not (isinstance(source, dict) and isinstance(source.get("contact"), dict)
+            and isinstance(source.get("bond_start"), dict)):
+        raise ValueError(f"{path}: not a calibration (no 'contact' and 'bond_start' mappings)")
+    for label, params in source["bond_start"].items():
+        if not isinstance(params, dict):
+            raise ValueError(f"{path}: bond_start[{label!r}] = {params!r} is not a mapping {{name: value}}")
+        for name, v in params.items():
+            check_positive(f"{path}: bond_start[{label!r}][{name!r}]", v, PARAMETERS.get(name, ("-",))[0])
+    return source
+
+
+def calibrate_into(out: Union[str, os.PathLike], variants=None, preset="tiny", *, max_runs: int = 4,
+                   compaction_runs: int = 2, source: Optional[Union[str, os.PathLike]] = None,
+                   settings: Optional[Mapping[str, object]] = None, executor=None,
+                   max_workers: Optional[int] = None, runner: Callable[[RunSpec], dict] = run_point,
+                   log: Callable[[str], None] = print) -> CalibrationReport:
+    """Calibrate ``variants`` (default all 12; Variants or (material, mc %, sigma_z MPa) keys)
+    on ``preset`` with :func:`pelletdem.variants.calibrate_variants` and write the results to
+    ``out`` (see the module docstring); the same call again resumes from ``out/cache``.
+
+    ``max_runs``: parameter points per variant's bond fit (E_b, sigma_c = tau_c).
+    ``compaction_runs``: k1 points of the shared compaction fit, within a factor 10 of the
+    preset's k1 (0: keep the preset's). ``source``: the ``out`` of an earlier calibration,
+    on a smaller preset: its contact law (k1, k2) and bond fits are used in place of the
+    compaction fit and Table 5's starting values, so one pellet per pressure is relaxed.
+    ``settings``: {'contact.X': v, 'bond.Y': w} (SI; :mod:`pelletdem.law_settings`) applied
+    to the preset's contact law and the base bond law before fitting. ``executor``,
+    ``max_workers``, ``runner``: as in ``calibrate_variants`` (a Dask ``distributed.Client``
+    is an executor). ``log``: where the report's text goes. Returns the
+    :class:`pelletdem.variants.CalibrationReport`.
+    """
+    from . import plots
+
+    p = as_preset(preset)
+    settings = dict(settings or {})
+    contact, bond = apply_settings(p.contact, BondLaw(), settings)
+    p = p.with_(contact=contact)
+    vs = as_variants(variants)
+    if source is not None:
+        src = load_calibration(source)
+        setup = dict(compaction=None, contact=src["contact"], start=src["bond_start"])
+    elif compaction_runs:
+        k1 = p.contact.k1
+        setup = dict(compaction={"k1": (k1 / 10, k1 * 10, k1)}, compaction_max_runs=compaction_runs)
+    else:
+        setup = dict(compaction=None)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    sittings = Sittings(out)
+    sittings.start()
+    report = calibrate_variants(vs, p, max_runs=max_runs, cache_dir=out / "cache", relaxed_dir=out / "relaxed",
+                                executor=executor, max_workers=max_workers, runner=runner, bond=bond, **setup)
+    log(str(report))
+    report.table.to_csv(out / "calibration.csv", index=False)
+    (out / CALIBRATION_FILE).write_text(json.dumps({
+        "preset": p.name, "variants": [v.label for v in vs], "set": settings, "contact": report.contact,
+        "bond_start": report.bond_start(), "from": os.fspath(source) if source is not None else None,
+        "n_simulations": report.n_simulations, "n_cached": report.n_cached,
+        "n_relaxations": report.n_relaxations, "wall_time_s": report.wall_time_s,
+        **sittings.finish(report)}, indent=1))
+
+    cache = RunCache(out / "cache")
+    records = [cache.get(k) for k in cache.keys()]
+    plots.save_calibration(report, vs, records, out)
+    log("wrote " + ", ".join(sorted(f.name for f in out.iterdir() if f.is_file())))
+    return report

@@ -1,0 +1,249 @@
+"""`pelletdem calibrate OUT_DIR` (calibrate_cli.py) and the library call it makes
+(calibration_dir.calibrate_into).
+
+Bad arguments are checked in-process with the calibration replaced by a trap (they exit with
+status 2 before any work); the files and the resume are checked with the fast stand-in for the
+engine of test_calibrate.py; one real `tiny` calibration of one variant runs in a subprocess
+(~10 s) and then again, from its cache, without a simulation.
+"""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import types
+
+import pytest
+
+from pelletdem import calibration_dir, cli
+from test_calibrate import CALLS, power_law_runner
+
+FILES = ["calibration.csv", "calibration.json", "fig15_measured_vs_simulated.png", "fig15_curves.png",
+         "segments.jsonl"]
+
+
+def _env():
+    env = dict(os.environ, OMP_WAIT_POLICY="PASSIVE", MPLBACKEND="Agg")
+    env.pop("DISPLAY", None)
+    return env
+
+
+@pytest.fixture
+def no_calibration(monkeypatch):
+    """calibrate_into replaced: a call records its arguments instead of simulating."""
+    calls = []
+
+    def trap(out, **kw):
+        calls.append((out, kw))
+        return None
+
+    monkeypatch.setattr(calibration_dir, "calibrate_into", trap)
+    return calls
+
+
+def _main(argv):
+    try:
+        return cli.main(argv)
+    except SystemExit as e:  # argparse's usage errors
+        return e.code
+
+
+@pytest.mark.parametrize("extra, name, allowed", [
+    (["--workers", "-1"], "--workers", "1..256"),
+    (["--workers", "0"], "--workers", "1..256"),
+    (["--max-runs", "0"], "--max-runs", "1..100"),
+    (["--max-runs", "101"], "--max-runs", "1..100"),
+    (["--compaction-runs", "-1"], "--compaction-runs", "0..100"),
+    (["--variant", "teak", "8", "120"], "MATERIAL", "birch, oak, pine"),
+    (["--variant", "oak", "9", "120"], "MC", "8 or 20"),
+    (["--variant", "oak", "8", "nan"], "PRESSURE_MPA", "60 or 120"),
+    (["--variant", "oak", "8", "100"], "PRESSURE_MPA", "60 or 120"),
+    (["--variant", "oak", "8", "120", "--variant", "oak", "8.0", "120"], "--variant oak 8.0 120", "twice"),
+    (["--set", "contact.nope=1"], "contact.nope", "allowed"),
+    (["--set", "contact.mu=-1"], "contact.mu", "allowed 0 <= mu"),
+    (["--set", "contact.mu=inf"], "contact.mu", "allowed 0 <= mu"),
+    (["--set", "bond.sigma_c=9e6"], "bond.sigma_c", "allowed"),
+    (["--set", "bond.youngs_modulus=9e6"], "bond.youngs_modulus", "allowed"),
+    (["--set", "mu=0.4"], "--set", "contact.NAME"),
+    (["--from", "nowhere"], "--from", "calibration.json"),
+    (["--dask", " "], "--dask", "tcp://"),
+    (["--preset", "huge"], "--preset", "tiny"),
+    (["--max-runs", "2.5"], "--max-runs", "int"),
+])
+def test_bad_arguments_exit_2_naming_the_argument_before_any_work(extra, name, allowed, no_calibration, capsys,
+                                                                  tmp_path):
+    out = tmp_path / "out"
+    assert _main(["calibrate", str(out), *extra]) == 2
+    err = capsys.readouterr().err
+    assert name in err and allowed in err, err
+    assert no_calibration == []
+    assert not out.exists()
+
+
+def test_out_dir_must_be_a_directory(no_calibration, capsys, tmp_path):
+    (tmp_path / "file").write_text("x")
+    for out in (str(tmp_path / "file"), " "):
+        assert _main(["calibrate", out]) == 2
+        assert "OUT_DIR" in capsys.readouterr().err
+    assert _main(["calibrate"]) == 2
+    assert "OUT_DIR" in capsys.readouterr().err
+    assert no_calibration == []
+
+
+def test_from_a_directory_that_holds_no_calibration(no_calibration, capsys, tmp_path):
+    src = tmp_path / "src"
+    src.mkdir()
+    (src / "calibration.json").write_text("{not json")
+    assert _main(["calibrate", str(tmp_path / "out"), "--from", str(src)]) == 2
+    assert "--from" in capsys.readouterr().err
+    (src / "calibration.json").write_text(json.dumps({"contact": {"k1": -1.0}, "bond_start": {}}))
+    assert _main(["calibrate", str(tmp_path / "out"), "--from", str(src)]) == 2
+    assert "k1" in capsys.readouterr().err
+    bad_start = {"oak MC 8% 120 MPa": {"E_b": "x"}}
+    (src / "calibration.json").write_text(json.dumps({"contact": {}, "bond_start": bad_start}))
+    assert _main(["calibrate", str(tmp_path / "out"), "--from", str(src)]) == 2
+    assert "bond_start['oak MC 8% 120 MPa']['E_b']" in capsys.readouterr().err
+    # the earlier calibration's k1 wins over --set: asking for both is refused
+    (src / "calibration.json").write_text(json.dumps({"contact": {"k1": 4e4, "k2": 1.6e5}, "bond_start": {}}))
+    assert _main(["calibrate", str(tmp_path / "out"), "--from", str(src), "--set", "contact.k1=5e4"]) == 2
+    assert "contact.k1" in capsys.readouterr().err
+    assert no_calibration == []
+
+
+def test_dask_without_distributed_says_how_to_install_it(no_calibration, capsys, monkeypatch, tmp_path):
+    monkeypatch.setitem(sys.modules, "distributed", None)  # as if not installed
+    assert _main(["calibrate", str(tmp_path / "out"), "--dask", "tcp://127.0.0.1:8786"]) == 2
+    assert "pip install distributed" in capsys.readouterr().err
+    assert no_calibration == []
+
+
+def test_arguments_reach_the_calibration(no_calibration, monkeypatch, tmp_path):
+    pytest.importorskip("distributed")
+    import distributed
+
+    clients = []
+
+    class FakeClient:
+        def __init__(self, address):
+            self.address, self.closed = address, False
+            clients.append(self)
+
+        def close(self):
+            self.closed = True
+
+    monkeypatch.setattr(distributed, "Client", FakeClient)
+    out = str(tmp_path / "out")
+    assert _main(["calibrate", out, "--preset", "quick", "--variant", "pine", "20", "60", "--variant", "oak",
+                  "8", "120.0", "--max-runs", "3", "--compaction-runs", "0", "--workers", "1",
+                  "--set", "contact.mu=0.4", "--set", "bond.softening=1", "--dask", "tcp://sched:8786"]) == 0
+    (got, kw), = no_calibration
+    assert got == out
+    assert [v.key for v in kw["variants"]] == [("pine", 20, 60), ("oak", 8, 120)]
+    assert (kw["preset"], kw["max_runs"], kw["compaction_runs"], kw["max_workers"]) == ("quick", 3, 0, 1)
+    assert kw["settings"] == {"contact.mu": 0.4, "bond.softening": 1.0}
+    assert kw["executor"] is clients[0] and clients[0].address == "tcp://sched:8786" and clients[0].closed
+    # defaults: tiny, all 12 variants, a local pool
+    no_calibration.clear()
+    assert _main(["calibrate", out]) == 0
+    (_, kw), = no_calibration
+    assert kw["preset"] == "tiny" and kw["variants"] is None and kw["executor"] is None and kw["source"] is None
+
+
+def test_calibrate_help_lists_every_option(capsys):
+    assert _main(["calibrate", "--help"]) == 0
+    text = capsys.readouterr().out
+    for opt in ("OUT_DIR", "--preset", "--variant", "--max-runs", "--compaction-runs", "--from", "--workers",
+                "--dask", "--set"):
+        assert opt in text, opt
+
+
+# --- the library call, on the fast stand-in for the engine ---------------------------------------
+
+VARIANTS = [("oak", 8, 120), ("pine", 20, 60)]
+
+
+def test_calibrate_into_writes_its_files_and_resumes_from_its_cache(tmp_path):
+    CALLS.clear()
+    out = tmp_path / "cal"
+    first = calibration_dir.calibrate_into(out, VARIANTS, "tiny", max_runs=3, compaction_runs=2,
+                                           settings={"contact.mu": 0.4}, executor="serial",
+                                           runner=power_law_runner, log=lambda s: None)
+    for name in FILES:
+        assert (out / name).is_file() and (out / name).stat().st_size > 0, name
+    saved = json.loads((out / "calibration.json").read_text())
+    assert saved["set"] == {"contact.mu": 0.4} and saved["preset"] == "tiny"
+    assert saved["variants"] == ["oak MC 8% 120 MPa", "pine MC 20% 60 MPa"]
+    assert saved["n_simulations"] == first.n_simulations == len(CALLS) > 0
+    assert set(saved["contact"]) == {"k1", "k2"}  # the compaction fit ran
+    assert len(saved["sittings"]) == 1
+    CALLS.clear()
+    again = calibration_dir.calibrate_into(out, VARIANTS, "tiny", max_runs=3, compaction_runs=2,
+                                           settings={"contact.mu": 0.4}, executor="serial",
+                                           runner=power_law_runner, log=lambda s: None)
+    assert CALLS == [] and again.n_simulations == 0 and again.n_cached == first.n_simulations
+    assert again.bond_start() == first.bond_start()
+    saved = json.loads((out / "calibration.json").read_text())
+    assert [s["n_simulations"] for s in saved["sittings"]] == [first.n_simulations, 0]
+    # another contact law is another set of runs
+    other = calibration_dir.calibrate_into(out, VARIANTS, "tiny", max_runs=3, compaction_runs=2, executor="serial",
+                                           runner=power_law_runner, log=lambda s: None)
+    assert other.n_simulations > 0
+
+
+def test_calibrate_into_from_an_earlier_calibration(tmp_path):
+    calibration_dir.calibrate_into(tmp_path / "small", VARIANTS, "tiny", max_runs=4, executor="serial",
+                                   runner=power_law_runner, log=lambda s: None)
+    src = json.loads((tmp_path / "small" / "calibration.json").read_text())
+    rep = calibration_dir.calibrate_into(tmp_path / "big", VARIANTS, "quick", max_runs=4, source=tmp_path / "small",
+                                         executor="serial", runner=power_law_runner, log=lambda s: None)
+    assert rep.compaction is None and rep.contact == src["contact"]
+    saved = json.loads((tmp_path / "big" / "calibration.json").read_text())
+    assert saved["from"] == str(tmp_path / "small") and saved["preset"] == "quick"
+
+
+def test_calibration_sittings_add_up(tmp_path):
+    """Wall time over sittings: a finished sitting counts start to end, a killed one (no end
+    line) start to its last cache record before the next start."""
+    (tmp_path / "cache" / "ab").mkdir(parents=True)
+    rows = [{"time": 1000.0, "event": "start"},                       # killed after 2 records
+            {"time": 5000.0, "event": "start"},                       # finished
+            {"time": 5600.0, "event": "end", "n_simulations": 3, "n_cached": 2}]
+    (tmp_path / "segments.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
+    for name, t in (("a", 1500.0), ("b", 1900.0), ("c", 5300.0)):
+        f = tmp_path / "cache" / "ab" / f"{name}.json"
+        f.write_text("{}")
+        os.utime(f, (t, t))
+    log = calibration_dir.Sittings(tmp_path)
+    log.start()  # a third sitting, which ends at once
+    out = log.finish(types.SimpleNamespace(n_simulations=0, n_cached=5))
+    s = out["sittings"]
+    assert [x["killed"] for x in s] == [True, False, False]
+    assert s[0]["wall_time_s"] == 900.0 and s[0]["n_simulations"] == 2
+    assert s[1]["wall_time_s"] == 600.0 and s[1]["n_simulations"] == 3
+    assert 0.0 <= s[2]["wall_time_s"] < 60.0
+    assert out["wall_time_total_s"] == sum(x["wall_time_s"] for x in s)
+
+
+# --- the real engine, end to end ------------------------------------------------------------------
+
+def test_a_tiny_calibration_from_the_command_line_then_again_from_its_cache(tmp_path):
+    out = tmp_path / "cal"
+    cmd = [sys.executable, "-m", "pelletdem.cli", "calibrate", str(out), "--variant", "oak", "8", "120",
+           "--max-runs", "1", "--compaction-runs", "0", "--workers", "1"]
+    first = subprocess.run(cmd, capture_output=True, text=True, timeout=300, env=_env(), cwd=tmp_path)
+    assert first.returncode == 0, first.stderr[-4000:]
+    for name in FILES:
+        assert (out / name).is_file(), name
+    saved = json.loads((out / "calibration.json").read_text())
+    assert saved["n_simulations"] == 2  # one relaxed pellet, one bond point branched off it
+    assert saved["n_relaxations"] == 1
+    csv = (out / "calibration.csv").read_text().splitlines()
+    assert len(csv) == 2 and csv[1].startswith("oak,8,120,")
+    again = subprocess.run(cmd, capture_output=True, text=True, timeout=300, env=_env(), cwd=tmp_path)
+    assert again.returncode == 0, again.stderr[-4000:]
+    assert again.stdout.startswith("calibration: 0 simulations run, 2 from the cache"), again.stdout[:300]
+    resumed = json.loads((out / "calibration.json").read_text())
+    assert (resumed["n_simulations"], resumed["n_cached"]) == (0, 2)
+    assert resumed["bond_start"] == saved["bond_start"]
+    assert [s["n_simulations"] for s in resumed["sittings"]] == [2, 0]
