@@ -44,6 +44,9 @@ __all__ = [
 ]
 
 CACHE_FORMAT = 4  # 2: sigma_f / dLf_D at the first failure; 3: after-relax fields honoured; 4: exact numbers
+# Of the diametral test alone, so that relaxed pellets stay valid: 2: samples at a fixed dL/D
+# spacing whatever the test's length.
+DIAMETRAL_FORMAT = 2
 
 #: Parameters a scan or fit can vary: name -> (unit, meaning).
 PARAMETERS: Dict[str, Tuple[str, str]] = {
@@ -151,6 +154,7 @@ class RunSpec:
         d = self.relax_payload()
         d["kind"] = self.kind
         if self.bond is not None:
+            d["diametral_format"] = DIAMETRAL_FORMAT
             d["bond"] = dataclasses.asdict(self.bond)
             d["after_relax"] = {k: getattr(self.preset, k) for k in _AFTER_RELAX_FIELDS if k != "name"}
             d["after_relax"].update({k: getattr(self.preset.contact, k) for k in _AFTER_RELAX_CONTACT})

@@ -466,6 +466,9 @@ def bond(pellet: Pellet, law: BondLaw, ramp_time: Optional[float] = None,
 
 # Plate approach (fraction of D) over which the break detection averages the plate force.
 BREAK_SMOOTHING_DLD = 0.0025
+# Plate approach (fraction of D) over which the diametral test records the preset's
+# sample_points samples; longer tests record more at the same spacing.
+DIAMETRAL_SAMPLE_SPAN = 0.1
 
 
 def diametral(pellet: Pellet, speed: Optional[float] = None, max_dLD: Optional[float] = None,
@@ -522,7 +525,9 @@ def diametral(pellet: Pellet, speed: Optional[float] = None, max_dLD: Optional[f
     marker0 = w.load_marker + gap
     target = dld * d
     max_steps = int((target + gap) / (v * w.dt)) + 1
-    _sample_every(pellet, max_steps)
+    # samples at a spacing in dL/D that does not depend on where the test stops, as a test
+    # machine's: a shorter test must not see a finer curve and a higher sampled peak
+    _sample_every(pellet, DIAMETRAL_SAMPLE_SPAN * d / (v * w.dt))
     n_broken0 = len(w.broken_bonds()["i"])
     stop = {"load_marker_above": marker0 + target}
     if pellet.preset.break_drop > 0.0:
