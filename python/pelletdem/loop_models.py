@@ -130,6 +130,9 @@ def fit_model(sim: Simulator, space: Space, effects: Sequence[str], fit_data: Da
     axis at the strength that switches the effect off, :func:`nested_points`), which join
     the emulator without being simulated again."""
     name = " + ".join(("baseline",) + tuple(effects))
+    n_new = design_size(space.dim) if n_design is None else n_design
+    log(f"{name}: simulating {n_new} design points on {len(fit_seeds)} packings x "
+        f"{len(fit_data.conditions)} conditions")
     U, Y, SE = simulate_design(sim, space, fit_data, fit_seeds, n_design)
     if shared is not None:
         U, Y, SE = np.vstack([U, shared[0]]), np.vstack([Y, shared[1]]), np.vstack([SE, shared[2]])
@@ -142,6 +145,7 @@ def fit_model(sim: Simulator, space: Space, effects: Sequence[str], fit_data: Da
         emu = _emulate(space, U, Y, SE, name, emu)
         new = fit_emulated(emu, fit_data, fit.u)
         moved = float(np.max(np.abs(new.u - fit.u)))
+        log(f"{name}: refinement {r + 1} ({len(U)} points), the fit moved {moved:.3f} of the box")
         fit = new
         if moved < 0.02:
             break

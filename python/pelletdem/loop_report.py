@@ -133,7 +133,9 @@ def _params(mf: ModelFit) -> str:
         v, se = mf.fit.params[name], mf.fit.se.get(name, math.nan)
         rel = mf.fit.relative.get(name, True)
         unc = f" (+-{100 * se:.0f} %)" if rel and math.isfinite(se) else (f" +- {se:.3g}" if math.isfinite(se) else "")
-        out.append(f"{name} = {v:.4g}{unc}")
+        lo, hi = mf.fit.interval(name, 2.0)
+        band = f", 2-sigma {lo:.3g}..{hi:.3g}" if name in mf.fit.profiles else ""
+        out.append(f"{name} = {v:.4g}{unc}{band}")
     return ", ".join(out)
 
 
@@ -142,7 +144,9 @@ def summary(res: LoopResult) -> dict:
     fitted parameters with standard errors, the steps' screening and trials, the power."""
     def model(mf: ModelFit) -> dict:
         return {"name": mf.name, "params": {k: mf.fit.params[k] for k in mf.space.names},
-                "se": {k: mf.fit.se.get(k) for k in mf.space.names}, "emulated_chi2": mf.fit.chi2,
+                "se": {k: mf.fit.se.get(k) for k in mf.space.names},
+                "interval_2sigma": {k: list(mf.fit.interval(k, 2.0)) for k in mf.space.names},
+                "emulated_chi2": mf.fit.chi2,
                 "design_points": int(len(mf.emulator.U))}
 
     return {"verdict": res.verdict, "chosen": list(res.chosen), "errors": res.errors,

@@ -88,6 +88,7 @@ class Step:
     trials: List[Trial]
     added: Optional[str]
     threshold: float
+    note: str = ""
 
 
 @dataclass
@@ -120,9 +121,11 @@ class LoopResult:
 
 
 def _fit_window(sim: Simulator, data: Dataset, say: Callable[[str], None]) -> str:
-    """Widen the simulator's diametral window (``max_dLD``, ``widen``) to the data's reach
-    (their last curve point and dL_f/D, plus 10 %) before any fit; the sentence to add to the
-    verdict when it cannot ('' when nothing is wrong)."""
+    """Fit the simulator's diametral window (``max_dLD``, ``widen``) to the data's reach (their
+    last curve point and dL_f/D, plus 10 %) before any fit: wider when the data go further,
+    narrower when they stop short (a test's cost grows with its length; a model that then
+    fails outside is caught by :func:`unfailed`). Returns the sentence to add to the verdict
+    when it cannot widen ('' when nothing is wrong)."""
     xs = [o.x for o in data.observations if o.quantity == "sigma_1"]
     xs += [o.value for o in data.observations if o.quantity == "dLf_D"]
     end = getattr(sim, "max_dLD", None)
@@ -130,6 +133,9 @@ def _fit_window(sim: Simulator, data: Dataset, say: Callable[[str], None]) -> st
         return ""
     reach = 1.1 * max(xs)
     if reach <= end:
+        if getattr(sim, "widen", None) is not None and reach < 0.9 * end:
+            say(f"the data reach dL/D = {max(xs):.3g}: the tests run to dL/D = {reach:.3g} instead of {end:.3g}")
+            sim.widen(reach)
         return ""
     if getattr(sim, "widen", None) is None or reach > MAX_WINDOW:
         note = (f"the data reach dL/D = {max(xs):.3g}, beyond the simulated test window (dL/D up to {end:.3g}), "
@@ -213,7 +219,7 @@ def close_loop(sim: Simulator, data: Dataset, base_bounds: Mapping[str, Sequence
                held_out: Optional[Callable[[Condition], bool]] = None,
                library: Optional[Mapping[str, Effect]] = None, fit_seeds: Sequence[int] = FIT_SEEDS,
                check_seeds: Sequence[int] = CHECK_SEEDS, alpha: float = 0.01, screen_top: int = 2,
-               screen_threshold: float = 3.84, max_effects: int = 2, min_check_gain: float = 0.25,
+               screen_threshold: Optional[float] = None, max_effects: int = 2, min_check_gain: float = 0.25,
                n_design: Optional[int] = None, log: Optional[Callable[[str], None]] = None) -> LoopResult:
     """Forward selection of candidate effects (see the module docstring).
 
@@ -224,7 +230,9 @@ def close_loop(sim: Simulator, data: Dataset, base_bounds: Mapping[str, Sequence
     (default :data:`pelletdem.effects.EFFECTS`). ``fit_seeds`` / ``check_seeds``: the
     packings of the designs and fits, and of the checks (disjoint). ``alpha``: family-wise
     level of the fit test. ``screen_top``: candidates fitted in full per round;
-    ``screen_threshold``: the first-order gain a candidate needs to be fitted in full.
+    ``screen_threshold``: the first-order gain a candidate needs to be fitted in full (default
+    half the fit test's threshold, at least 3.84: a candidate that cannot come near the test to
+    first order is not worth a design of its own).
     ``max_effects``: rounds of forward selection. ``min_check_gain``: the fraction of the
     model's excess chi2 on the check seeds a candidate must remove. ``n_design``: design points per model
     (default :func:`pelletdem.loop_models.design_size`).
@@ -245,6 +253,8 @@ def close_loop(sim: Simulator, data: Dataset, base_bounds: Mapping[str, Sequence
         raise ValueError(f"min_check_gain = {min_check_gain!r} is out of range: allowed 0 <= gain < 1")
     if not (isinstance(max_effects, int) and 0 <= max_effects <= 10):
         raise ValueError(f"max_effects = {max_effects!r} is out of range: allowed 0..10")
+    if screen_threshold is not None and not (isinstance(screen_threshold, (int, float)) and screen_threshold >= 0):
+        raise ValueError(f"screen_threshold = {screen_threshold!r} is out of range: allowed >= 0 (or None)")
     if not (isinstance(screen_top, int) and 1 <= screen_top <= 20):
         raise ValueError(f"screen_top = {screen_top!r} is out of range: allowed 1..20")
     if not base_bounds:
@@ -264,7 +274,8 @@ def close_loop(sim: Simulator, data: Dataset, base_bounds: Mapping[str, Sequence
            ", none held out (the checks use fresh packings of the fit conditions)"))
 
     def fit(space: Space, effects, start_params=None, shared=None) -> ModelFit:
-        n = n_design if n_design is not None or shared is None else max(8, 4 * space.dim)
+        # a candidate's box shares the baseline's points (its off face): fewer new ones serve
+        n = n_design if n_design is not None or shared is None else max(8, 2 * space.dim + 2)
         return fit_model(sim, space, effects, fit_data, heldout, fit_seeds, check_seeds, start_params, n, say,
                          shared=shared)
 
@@ -311,7 +322,16 @@ def close_loop(sim: Simulator, data: Dataset, base_bounds: Mapping[str, Sequence
         n_held = len(heldout) if heldout is not None else 0
         n_check = n + n_held
         noise_level = n_check + 2.0 * math.sqrt(2.0 * n_check)
-        for s in [s for s in screens if not s.skipped and s.gain >= screen_threshold][:screen_top]:
+        if base_before <= noise_level:
+            # the check on fresh packings is the test every candidate must pass; at the noise
+            # level there is nothing for it to confirm, so no candidate is fitted in full
+            note = (f"on fresh packings the model's chi2 ({base_before:.1f} on {n_check} points) is within the "
+                    f"noise level ({noise_level:.1f}): no candidate could be confirmed there, none was fitted")
+            say(note)
+            steps.append(Step(model, residual, screens, [], None, threshold, note))
+            break
+        gate = max(3.84, 0.5 * threshold) if screen_threshold is None else screen_threshold
+        for s in [s for s in screens if not s.skipped and s.gain >= gate][:screen_top]:
             e = s.effect
             axis = Axis(e.param, e.lo, e.hi, e.log)
             space = model.space.with_axis(axis, e.fixed)
@@ -323,9 +343,6 @@ def close_loop(sim: Simulator, data: Dataset, base_bounds: Mapping[str, Sequence
             held_worse = held_after - held_before
             if drop < threshold:
                 ok, why = False, f"fit chi2 fell by {drop:.1f}, below the threshold {threshold:.1f}"
-            elif base_before <= noise_level:
-                ok, why = False, (f"on fresh packings the model's chi2 ({base_before:.1f} on {n_check} points) is "
-                                  f"already at the noise level ({noise_level:.1f}): nothing to confirm it there")
             elif base_before - after < need:
                 ok, why = False, (f"chi2 on fresh packings {base_before:.1f} -> {after:.1f}: it needed to fall "
                                   f"by {need:.1f}")
@@ -358,6 +375,8 @@ def _verdict(chosen: Sequence[str], steps: Sequence[Step], baseline: ModelFit) -
     if chosen:
         return "added " + ", then ".join(chosen)
     first = steps[0]
+    if first.note:
+        return "nothing added: " + first.note
     if not first.trials:
         if first.residual.structured:
             return "no candidate explains this residual"

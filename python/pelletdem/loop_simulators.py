@@ -220,7 +220,8 @@ class EngineSimulator(Simulator):
         return float(self.setup.max_dLD if self.setup.max_dLD is not None else self.setup.preset.max_dLD)
 
     def widen(self, max_dLD: float) -> None:
-        """Run later diametral tests to ``max_dLD`` (-): a test that ended before its peak."""
+        """Run later diametral tests to ``max_dLD`` (-): further for a test that ended before its
+        peak, shorter where the data stop sooner."""
         self.setup = dataclasses.replace(self.setup, max_dLD=float(max_dLD))
 
     @property
