@@ -1,6 +1,7 @@
 """`pelletdem loop`: the discrepancy loop from the command line.
 
     pelletdem loop --data FILE.toml --out DIR              # a user's data (see loop_manifest)
+    pelletdem loop --data example --out DIR                # the shipped example (pelletdem/data/loop_example)
     pelletdem loop --data paper --out DIR                  # the paper's Tables 2 and 3 (oak)
     pelletdem loop --synthetic bond_softening=1 --out DIR  # engine data with a hidden effect
     pelletdem loop --synthetic none --out DIR              # the control: no effect
@@ -26,8 +27,8 @@ from .loop_synthetic import DATA_SEEDS
 SYNTHETIC_BOND = {"youngs_modulus": 60e6, "sigma_c": 9e6, "tau_c": 9e6}
 SYNTHETIC_BOUNDS = {"E_b": (2e7, 2e8), "sigma_c": (3e6, 3e7)}
 SYNTHETIC_PRESSURES = (60e6, 120e6, 90e6)
-#: The diametral test window (dL/D) the loop starts with; it widens it when the fitted model
-#: does not fail inside.
+#: The diametral test window (dL/D) the loop starts with (synthetic data are made to it); it is
+#: then fitted to the data's reach, and widened when the fitted model does not fail inside.
 WINDOW = 0.25
 
 
@@ -38,8 +39,9 @@ def add_parser(sub) -> None:
     p = sub.add_parser("loop", help="fit, trace the residual to a missing effect, add it, report",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", required=True, help="output directory")
-    p.add_argument("--data", default=None, metavar="FILE|paper",
-                   help="a loop data manifest (TOML, see docs/loop.md) or 'paper' for the paper's tables")
+    p.add_argument("--data", default=None, metavar="FILE|example|paper",
+                   help="a loop data manifest (TOML, see docs/loop.md), 'example' for the shipped example "
+                        "(made with the engine, an effect hidden in it) or 'paper' for the paper's tables")
     p.add_argument("--synthetic", default=None, metavar="EFFECT[=VALUE]",
                    help="make the data with the engine, with this effect hidden in it "
                         f"({', '.join(EFFECTS)}, none, or any contact.X=V / bond.X=V)")
@@ -52,7 +54,8 @@ def add_parser(sub) -> None:
                    help="pellet size of the model (default tiny, or the manifest's)")
     p.add_argument("--packings", type=int, default=4, help="packings every prediction averages (fit seeds)")
     p.add_argument("--max-effects", type=int, default=2, help="effects forward selection may add")
-    p.add_argument("--window", type=float, default=WINDOW, help="diametral test window, dL/D (widened if needed)")
+    p.add_argument("--window", type=float, default=WINDOW,
+                   help="diametral test window, dL/D (then fitted to the data's reach)")
     p.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1), help="worker processes")
     p.add_argument("--dask", default=None, metavar="ADDRESS", help="a Dask scheduler to run the simulations on")
     p.add_argument("--cache", default=None, help="run cache directory (default OUT/cache): a rerun resumes")
@@ -90,7 +93,7 @@ def _check(args) -> None:
     from .law_settings import parse_settings
 
     if (args.data is None) == (args.synthetic is None):
-        raise ValueError("give --data FILE|paper or --synthetic EFFECT, one of them")
+        raise ValueError("give --data FILE|example|paper or --synthetic EFFECT, one of them")
     for name, lo, hi in (("packings", 2, 64), ("workers", 1, 256), ("max_effects", 0, 10), ("draw", 0, 999)):
         v = getattr(args, name)
         if not lo <= v <= hi:
@@ -126,9 +129,9 @@ def _problem(args):
         held = tuple(c for c in data.conditions if c.mc == 20 and c.sigma_z == 60e6)
         return data, held, bounds, None, BondLaw(), settings, args.preset or "tiny", \
             "Discrepancy loop on the paper's measurements"
-    from .loop_manifest import load_manifest
+    from .loop_manifest import example_manifest, load_manifest
 
-    m = load_manifest(args.data)
+    m = load_manifest(example_manifest() if args.data == "example" else args.data)
     for k, v in m.settings.items():
         settings.setdefault(k, v)  # the command line's --set wins
     return m.dataset, m.held_out, m.bounds, None, BondLaw(), settings, args.preset or m.preset, \

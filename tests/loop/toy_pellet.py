@@ -13,6 +13,7 @@ the density (compaction stage) and with it the strength (as the fourth power of 
 """
 from __future__ import annotations
 
+import functools
 import zlib
 
 import numpy as np
@@ -77,3 +78,32 @@ def toy(params, c: Condition, seed: int = 0) -> Prediction:
     return Prediction(curve=(x, y), compaction=(xc, sz),
                       scalars={"sigma_f": float(y[k]), "dLf_D": float(x[k]), "bulk_density": float(rho),
                                "peaked": 1.0})
+
+
+@functools.lru_cache(maxsize=None)
+def _example_scales():
+    """(stress, dL/D, dh/h0) factors that put the toy on the shipped example's scale: the
+    example's sigma_f and dL_f/D at its highest pressure over the toy's there under the
+    example's true bond parameters (pelletdem.loop_cli.SYNTHETIC_BOND), and the end of its
+    compaction data over the toy's."""
+    from pelletdem.loop_cli import SYNTHETIC_BOND
+    from pelletdem.loop_manifest import example_manifest, load_manifest
+
+    data = load_manifest(example_manifest()).dataset
+    c = max(data.conditions, key=lambda c: c.sigma_z)
+    scalars = {o.quantity: o.value for o in data.observations
+               if o.condition == c and o.quantity in ("sigma_f", "dLf_D")}
+    p = toy({"E_b": SYNTHETIC_BOND["youngs_modulus"], "sigma_c": SYNTHETIC_BOND["sigma_c"]}, c)
+    x_end = max(o.x for o in data.observations if o.quantity == "sigma_z")
+    return (scalars["sigma_f"] / p.scalars["sigma_f"], scalars["dLf_D"] / p.scalars["dLf_D"],
+            x_end / float(np.max(p.compaction[0])))
+
+
+def example_toy(params, c: Condition, seed: int = 0) -> Prediction:
+    """The toy pellet at the scale of the shipped example data (pelletdem/data/loop_example):
+    a cheap stand-in for the engine where only the code path matters (notebook 04's fast test)."""
+    stress, dl, dh = _example_scales()
+    p = toy(params, c, seed)
+    (x, y), (xc, sz) = p.curve, p.compaction
+    sc = dict(p.scalars, sigma_f=p.scalars["sigma_f"] * stress, dLf_D=p.scalars["dLf_D"] * dl)
+    return Prediction(curve=(x * dl, y * stress), compaction=(xc * dh, sz), scalars=sc)
