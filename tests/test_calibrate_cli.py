@@ -247,3 +247,40 @@ def test_a_tiny_calibration_from_the_command_line_then_again_from_its_cache(tmp_
     assert (resumed["n_simulations"], resumed["n_cached"]) == (0, 2)
     assert resumed["bond_start"] == saved["bond_start"]
     assert [s["n_simulations"] for s in resumed["sittings"]] == [2, 0]
+
+
+def test_data_and_variant_are_refused_together(no_calibration, capsys, tmp_path):
+    rc = _main(["calibrate", str(tmp_path / "o"), "--data", "example", "--variant", "oak", "8", "120"])
+    assert rc == 2 and "--variant" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
+
+
+def test_data_file_errors_name_the_file_before_any_work(no_calibration, capsys, tmp_path):
+    bad = tmp_path / "data.toml"
+    bad.write_text('[[condition]]\npressure_mpa = "high"\nsigma_f = { mean = 1e6, sd = 1e5, n = 3 }\n')
+    rc = _main(["calibrate", str(tmp_path / "o"), "--data", str(bad)])
+    err = capsys.readouterr().err
+    assert rc == 2 and "data.toml" in err and "pressure_mpa" in err
+
+
+def test_calibrate_on_a_users_data_fits_the_baseline_and_adds_nothing(tmp_path, monkeypatch):
+    # The engine is replaced by the analytic pellet on the example's scale: this checks the
+    # path from the command line to the report, not the physics.
+    sys.path.insert(0, os.path.join(os.path.dirname(__file__), "loop"))
+    from toy_pellet import example_toy
+
+    from pelletdem import loop
+    from pelletdem.loop_simulators import FunctionSimulator
+
+    class Toy(FunctionSimulator):
+        def __init__(self, preset, bond=None, contact=None, seeds=(0,), **kw):
+            super().__init__(example_toy, seeds)
+
+    monkeypatch.setattr(loop, "EngineSimulator", Toy)
+    out = tmp_path / "cal"
+    assert cli.main(["calibrate", str(out), "--data", "example", "--packings", "2", "--workers", "1"]) == 0
+    res = json.loads((out / "loop.json").read_text())
+    assert res["chosen"] == [] and res["steps"][0]["screens"] == []
+    lo, hi = res["final"]["interval_2sigma"]["E_b"]
+    assert 2e7 <= lo <= res["final"]["params"]["E_b"] <= hi <= 2e8
+    assert (out / "report.md").read_text().startswith("# Calibration on")

@@ -4,6 +4,7 @@
     pelletdem calibrate OUT_DIR --variant oak 8 120 --max-runs 2   # one variant
     pelletdem calibrate QUICK --preset quick --compaction-runs 6 --max-runs 8       # ~20 min, 2 cores
     pelletdem calibrate PAPER --preset paper --max-runs 8 --from QUICK --dask HOST:8786   # hours
+    pelletdem calibrate OUT_DIR --data FILE.toml                   # a user's data (a loop manifest)
 
 One shared loading stiffness k1 against Table 2's pellet densities, then E_b and sigma_c per
 variant against Table 3's sigma_f and dL_f/D. Writes calibration.csv, calibration.json and the
@@ -11,6 +12,13 @@ Fig. 15 plots into OUT_DIR (pelletdem.calibration_dir). Every run is cached in O
 the same command again resumes where a stopped one ended and runs nothing twice. --from DIR
 starts from an earlier calibration (its k1 and bond fits, on a smaller preset) in place of
 the compaction fit and Table 5's values. Every argument is checked before any simulation.
+
+With --data FILE (a loop data manifest, docs/loop.md; 'example' for the shipped one) the
+manifest's [fit] parameters are fitted to its conditions that are not held out, as the
+discrepancy loop fits its baseline: means over --packings packings, a Gaussian-process
+emulator of a space-filling design, intervals from its profile, and the errors on fresh
+packings for the fitted and held-out conditions (OUT_DIR/report.md, loop.json). No effect is
+added; `pelletdem loop` looks for one.
 """
 from __future__ import annotations
 
@@ -52,6 +60,11 @@ def add_arguments(p: argparse.ArgumentParser, *, preset: str = "tiny", max_runs:
                    help=f"local worker processes (1..256; default {workers})")
     p.add_argument("--dask", default=None, metavar="ADDRESS",
                    help="run the simulations on this Dask scheduler (e.g. tcp://host:8786; needs distributed)")
+    p.add_argument("--data", default=None, metavar="FILE|example",
+                   help="calibrate against a user's data (a loop manifest, docs/loop.md) instead of the "
+                        "paper's variants")
+    p.add_argument("--packings", type=int, default=4, metavar="N",
+                   help="with --data: packings every prediction averages (2..64; default 4)")
     p.add_argument("--set", action="append", default=[], metavar="LAW.NAME=VALUE",
                    help="set a contact or bond law parameter, e.g. contact.mu=0.4 (SI units; repeatable; "
                         "not the fitted bond.youngs_modulus, bond.sigma_c, bond.tau_c)")
@@ -112,6 +125,12 @@ def check(args) -> dict:
             raise ValueError(f"--{name.replace('_', '-')} = {v} is out of range: allowed {lo}..{hi}")
     variants = parse_variants(args.variant)
     settings = parse_settings(args.set)
+    if args.data is not None:
+        for flag, given in (("--variant", args.variant), ("--from", args.source)):
+            if given:
+                raise ValueError(f"{flag} is for the paper's variants; with --data the manifest says what is fitted")
+        if not 2 <= args.packings <= 64:
+            raise ValueError(f"--packings = {args.packings} is out of range: allowed 2..64")
     for name in settings:
         if name in FITTED:
             raise ValueError(f"--set {name}: the calibration fits {FITTED[name]} per variant; "
@@ -149,6 +168,8 @@ def run(args) -> int:
     from . import calibration_dir
 
     kw = check(args)
+    if args.data is not None:
+        return _fit_user_data(args)
     client = None
     if args.dask is not None:
         from distributed import Client
@@ -163,3 +184,14 @@ def run(args) -> int:
         if client is not None:
             client.close()
     return 0
+
+
+def _fit_user_data(args) -> int:
+    """``--data``: the discrepancy loop's baseline fit alone (no effect is looked for)."""
+    from . import loop_cli
+
+    ns = argparse.Namespace(out=args.out, data=args.data, synthetic=None, draw=0, noise=0.02, materials="oak",
+                            set=list(args.set), preset=None if args.preset == "tiny" else args.preset,
+                            packings=args.packings, max_effects=0, window=loop_cli.WINDOW,
+                            workers=args.workers, dask=args.dask, cache=None)
+    return loop_cli.run(ns, title="Calibration on")

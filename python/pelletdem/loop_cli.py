@@ -19,6 +19,7 @@ import json
 import math
 import os
 import time
+from typing import Optional
 
 from .loop_synthetic import DATA_SEEDS
 
@@ -146,15 +147,19 @@ def _executor(args):
     return None
 
 
-def run(args) -> int:
-    """Run `pelletdem loop` with parsed ``args``; returns the exit status."""
+def run(args, title: Optional[str] = None) -> int:
+    """Run `pelletdem loop` with parsed ``args``; returns the exit status. ``title``: the
+    report's title in place of the loop's, followed by the data's name (`pelletdem
+    calibrate --data` runs this with no effect to add)."""
     import dataclasses
 
     from . import loop
     from .loop_report import summary, write_report
 
     _check(args)
-    data, held, bounds, start, bond, settings, preset, title = _problem(args)  # a bad file fails here
+    data, held, bounds, start, bond, settings, preset, heading = _problem(args)  # a bad file fails here
+    if title is not None:
+        heading = f"{title} {heading.split(' on ', 1)[-1]}"
     t0 = time.perf_counter()
     os.makedirs(args.out, exist_ok=True)
     cache = args.cache or os.path.join(args.out, "cache")
@@ -183,7 +188,7 @@ def run(args) -> int:
                                   max_effects=args.max_effects, log=say)
         if client is not None:
             client.close()
-        report = write_report(res, args.out, title)
+        report = write_report(res, args.out, heading)
         out = summary(res)
         out.update({"preset": preset, "packings": args.packings, "hidden": args.synthetic, "draw": args.draw,
                     "data": args.data, "report": report, "total_wall_time_s": round(time.perf_counter() - t0, 1)})
