@@ -37,8 +37,8 @@ import numpy as np
 PRESET = "tiny"
 MATERIAL = "oak"
 MOISTURE_PERCENT = 8.0
-HIDDEN = "bond_softening"  # an effect of pelletdem.effects, not declared in the manifest
-HIDDEN_STRENGTH = 1.0
+HIDDEN = "overlap_bond_radius"  # an effect of pelletdem.effects, not declared in the manifest
+HIDDEN_STRENGTH = 3.0          # bonds between flattened contacts are wider: r_b (1 + g delta_0 / r*)
 NOISE = 0.02               # relative measurement noise per replicate
 STOP_AFTER = 2.0           # the diametral test ends at this multiple of the replicate's dL_f/D
 NOISE_SEED = 0
