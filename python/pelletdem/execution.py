@@ -19,6 +19,7 @@ import contextlib
 import multiprocessing
 import os
 import threading
+import time
 import warnings
 from typing import Callable, Dict, List, Optional, Sequence
 
@@ -38,6 +39,11 @@ def _is_main_guard(test) -> bool:
     names = [x for x in sides if isinstance(x, ast.Name) and x.id == "__name__"]
     consts = [x for x in sides if isinstance(x, ast.Constant) and x.value == "__main__"]
     return len(names) == 1 and len(consts) == 1
+
+
+# When this module was first imported (s since the epoch), a lower bound on when the running
+# script started that is good enough to tell whether the file has been edited since.
+_IMPORTED_AT = time.time()
 
 
 def unguarded_main_line() -> Optional[int]:
@@ -61,6 +67,8 @@ def unguarded_main_line() -> Optional[int]:
         return None
     line = frame.f_lineno
     try:
+        if os.path.getmtime(path) > _IMPORTED_AT:
+            return None  # the script was edited while it runs: its line numbers are not the file's
         with open(path, encoding="utf-8") as fh:
             tree = ast.parse(fh.read(), path)
     except (OSError, SyntaxError, ValueError):
