@@ -272,13 +272,19 @@ def test_calibrate_on_a_users_data_fits_the_baseline_and_adds_nothing(tmp_path, 
     from pelletdem import loop
     from pelletdem.loop_simulators import FunctionSimulator
 
+    presets = []
+
     class Toy(FunctionSimulator):
         def __init__(self, preset, bond=None, contact=None, seeds=(0,), **kw):
+            presets.append(preset)
             super().__init__(example_toy, seeds)
 
     monkeypatch.setattr(loop, "EngineSimulator", Toy)
     out = tmp_path / "cal"
     assert cli.main(["calibrate", str(out), "--data", "example", "--packings", "2", "--workers", "1"]) == 0
+    from pelletdem.loop_manifest import example_manifest, load_manifest
+
+    assert presets == [load_manifest(example_manifest()).preset]  # the manifest's, as none was given
     res = json.loads((out / "loop.json").read_text())
     assert res["chosen"] == [] and res["steps"][0]["screens"] == []
     lo, hi = res["final"]["interval_2sigma"]["E_b"]

@@ -44,8 +44,9 @@ def add_arguments(p: argparse.ArgumentParser, *, preset: str = "tiny", max_runs:
     shared by the `calibrate` subcommand and examples/03_calibration.py."""
     workers = workers or min(2, os.cpu_count() or 1)
     p.add_argument("out", metavar="OUT_DIR", help="output directory (created; its cache/ makes a rerun resume)")
-    p.add_argument("--preset", default=preset, choices=["tiny", "quick", "paper"],
-                   help=f"pellet size (default {preset})")
+    p.add_argument("--preset", default=None, choices=["tiny", "quick", "paper"],
+                   help=f"pellet size (default {preset}; with --data the manifest's, else tiny)")
+    p.set_defaults(preset_default=preset)
     p.add_argument("--variant", nargs=3, action="append", default=None, metavar=("MATERIAL", "MC", "PRESSURE_MPA"),
                    help="calibrate only this variant, e.g. oak 8 120 (birch/oak/pine, MC 8 or 20 %%, "
                         "60 or 120 MPa; repeatable; default all 12)")
@@ -135,7 +136,7 @@ def check(args) -> dict:
         if name in FITTED:
             raise ValueError(f"--set {name}: the calibration fits {FITTED[name]} per variant; "
                              f"allowed: the other bond parameters and any contact.X")
-    preset = get_preset(args.preset)
+    preset = get_preset(args.preset or args.preset_default)
     contact, _ = apply_settings(preset.contact, BondLaw(), settings)
     if args.source is not None:
         try:
@@ -156,7 +157,7 @@ def check(args) -> dict:
         if importlib.util.find_spec("distributed") is None:
             raise ValueError("--dask needs Dask's distributed package, which is not installed: "
                              "pip install distributed")
-    return dict(variants=variants, preset=args.preset, max_runs=args.max_runs,
+    return dict(variants=variants, preset=args.preset or args.preset_default, max_runs=args.max_runs,
                 compaction_runs=args.compaction_runs, source=args.source, settings=settings,
                 max_workers=args.workers)
 
@@ -191,7 +192,7 @@ def _fit_user_data(args) -> int:
     from . import loop_cli
 
     ns = argparse.Namespace(out=args.out, data=args.data, synthetic=None, draw=0, noise=0.02, materials="oak",
-                            set=list(args.set), preset=None if args.preset == "tiny" else args.preset,
+                            set=list(args.set), preset=args.preset,
                             packings=args.packings, max_effects=0, window=loop_cli.WINDOW,
                             workers=args.workers, dask=args.dask, cache=None)
     return loop_cli.run(ns, title="Calibration on")
