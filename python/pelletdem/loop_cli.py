@@ -19,7 +19,6 @@ import json
 import math
 import os
 import time
-from typing import Optional
 
 from .loop_synthetic import DATA_SEEDS
 
@@ -109,7 +108,8 @@ def _check(args) -> None:
 
 
 def _problem(args):
-    """(dataset, held_out, bounds, start, bond, settings, preset, title) of the run."""
+    """(dataset, held_out, bounds, start, bond, settings, preset, subject) of the run; subject:
+    what the data are, for the report's title."""
     from . import loop
     from .engine import BondLaw
     from .law_settings import parse_settings
@@ -119,9 +119,9 @@ def _problem(args):
         conds = [loop.Condition(s) for s in SYNTHETIC_PRESSURES]
         held = (conds[-1],)
         truth = synthetic_truth(args.synthetic)
-        title = f"Discrepancy loop on synthetic data ({'hidden: ' + args.synthetic if truth else 'control'})"
+        subject = f"synthetic data ({'hidden: ' + args.synthetic if truth else 'control'})"
         return (conds, truth), held, dict(SYNTHETIC_BOUNDS), None, BondLaw(**SYNTHETIC_BOND), settings, \
-            args.preset or "tiny", title
+            args.preset or "tiny", subject
     if args.data == "paper":
         mats = [m.strip() for m in args.materials.split(",") if m.strip()]
         data = loop.Dataset.from_paper(materials=mats)
@@ -129,14 +129,14 @@ def _problem(args):
         bounds = {f"{p}[{m}]": b for m in mats for p, b in (("E_b", (1e8, 1e10)), ("sigma_c", (5e6, 5e8)))}
         held = tuple(c for c in data.conditions if c.mc == 20 and c.sigma_z == 60e6)
         return data, held, bounds, None, BondLaw(), settings, args.preset or "tiny", \
-            "Discrepancy loop on the paper's measurements"
+            "the paper's measurements"
     from .loop_manifest import example_manifest, load_manifest
 
     m = load_manifest(example_manifest() if args.data == "example" else args.data)
     for k, v in m.settings.items():
         settings.setdefault(k, v)  # the command line's --set wins
     return m.dataset, m.held_out, m.bounds, None, BondLaw(), settings, args.preset or m.preset, \
-        f"Discrepancy loop on {m.name}"
+        str(m.name)
 
 
 def _executor(args):
@@ -147,9 +147,9 @@ def _executor(args):
     return None
 
 
-def run(args, title: Optional[str] = None) -> int:
+def run(args, title: str = "Discrepancy loop on") -> int:
     """Run `pelletdem loop` with parsed ``args``; returns the exit status. ``title``: the
-    report's title in place of the loop's, followed by the data's name (`pelletdem
+    report's title, followed by what the data are (`pelletdem
     calibrate --data` runs this with no effect to add)."""
     import dataclasses
 
@@ -157,9 +157,7 @@ def run(args, title: Optional[str] = None) -> int:
     from .loop_report import summary, write_report
 
     _check(args)
-    data, held, bounds, start, bond, settings, preset, heading = _problem(args)  # a bad file fails here
-    if title is not None:
-        heading = f"{title} {heading.split(' on ', 1)[-1]}"
+    data, held, bounds, start, bond, settings, preset, subject = _problem(args)  # a bad file fails here
     t0 = time.perf_counter()
     os.makedirs(args.out, exist_ok=True)
     cache = args.cache or os.path.join(args.out, "cache")
@@ -188,7 +186,7 @@ def run(args, title: Optional[str] = None) -> int:
                                   max_effects=args.max_effects, log=say)
         if client is not None:
             client.close()
-        report = write_report(res, args.out, heading)
+        report = write_report(res, args.out, f"{title} {subject}")
         out = summary(res)
         out.update({"preset": preset, "packings": args.packings, "hidden": args.synthetic, "draw": args.draw,
                     "data": args.data, "report": report, "total_wall_time_s": round(time.perf_counter() - t0, 1)})
