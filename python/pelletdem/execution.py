@@ -30,6 +30,31 @@ from .worker import run_point
 __all__ = ["open_executor", "with_relaxed_dir", "Evaluator", "unguarded_main_line", "check_main_guard"]
 
 
+#: How often (s) a worker looks whether the process that started it is still there.
+PARENT_POLL_S = 1.0
+
+
+def _exit_with_parent(parent: int) -> None:
+    """Worker initializer: a daemon thread ends this worker (exit status 3) once the process
+    ``parent`` that started it is gone. A driver killed by a signal on its own process (not
+    its process group) runs no shutdown, and its workers would otherwise compute on for as
+    long as their runs take (the engine releases the GIL while it steps, so the thread is
+    heard within a second)."""
+    def watch() -> None:
+        while True:
+            time.sleep(PARENT_POLL_S)
+            if os.getppid() != parent:
+                os._exit(3)
+
+    threading.Thread(target=watch, name="pelletdem-parent-watch", daemon=True).start()
+
+
+def _process_pool(n: int, context) -> cf.ProcessPoolExecutor:
+    """A process pool of ``n`` workers started by ``context`` that end with this process."""
+    return cf.ProcessPoolExecutor(max_workers=n, mp_context=context, initializer=_exit_with_parent,
+                                  initargs=(os.getpid(),))
+
+
 def _is_main_guard(test) -> bool:
     import ast
 
@@ -138,7 +163,7 @@ class _RespawningPool(cf.Executor):
         except cf.BrokenExecutor:
             with self._lock:
                 if self._pool is pool:
-                    self._pool = cf.ProcessPoolExecutor(max_workers=self._max_workers, mp_context=self._mp_context)
+                    self._pool = _process_pool(self._max_workers, self._mp_context)
                     self._made.append(self._pool)
                 pool = self._pool
             return pool.submit(fn, *args, **kwargs)
@@ -157,7 +182,7 @@ class _RespawningPool(cf.Executor):
                     return
                 fn, args, out = self._queue.pop(0)
                 self._running += 1
-                pool = cf.ProcessPoolExecutor(max_workers=1, mp_context=self._mp_context)
+                pool = _process_pool(1, self._mp_context)
                 self._isolated.add(pool)
             try:
                 inner = pool.submit(fn, *args)
@@ -205,8 +230,7 @@ def open_executor(executor, max_workers: Optional[int]):
         if not isinstance(n, int) or n < 1:
             raise ValueError(f"max_workers = {max_workers!r} must be an integer >= 1")
         check_main_guard()
-        ex = _RespawningPool(cf.ProcessPoolExecutor(max_workers=n, mp_context=multiprocessing.get_context("spawn")),
-                             own=True)
+        ex = _RespawningPool(_process_pool(n, multiprocessing.get_context("spawn")), own=True)
         try:
             yield ex
         finally:

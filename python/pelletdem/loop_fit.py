@@ -13,8 +13,14 @@ with the Welch-Satterthwaite degrees of freedom it is turned into the normal sco
 same tail probability (:func:`welch_z`), and chi2 = sum z_i^2 behaves as a chi-square under
 noise. chi2 = sum z_i^2 is minimised by scipy.optimize.least_squares
 (trust region, bounded to the box) from several starts: the given one and the design points
-that fit best. The parameters' standard errors come from the Jacobian at the optimum,
-(J^T J)^-1 in the box's units, turned into relative errors on log axes.
+that fit best. The parameters' standard errors come from the Jacobian at the optimum, turned
+into relative errors on log axes: (J^T J)^-1 in the box's units when the misfits are
+independent, and the sandwich (J^T J)^-1 J^T R J (J^T J)^-1 when observations that share a
+pellet's packing have correlated misfits R (:mod:`pelletdem.loop_noise`): a lucky packing is
+strong along its whole curve, and counting its points as independent evidence would make the
+errors too small. The correlation enters only there, linearly: inverting a correlation
+estimated from tens of packings would amplify its noise. Profile intervals widen by the same
+factor (their chi2 threshold times the ratio of sandwich to plain variance).
 """
 from __future__ import annotations
 
@@ -56,20 +62,47 @@ class EmulatedFit:
 
     relative: Dict[str, bool] = field(default_factory=dict)
     profiles: Dict[str, tuple] = field(default_factory=dict)
+    #: Per parameter, the sandwich variance over the plain one (>= 1): how much correlated
+    #: misfits widen its interval, profile intervals included.
+    widen: Dict[str, float] = field(default_factory=dict)
 
     def interval(self, name: str, k: float = 2.0) -> tuple:
         """(low, high) of parameter ``name`` (SI): where its profile's chi2 stays within k^2
-        of the minimum when it was profiled (:func:`profile`), else +-k standard errors."""
+        (times :attr:`widen`) of the minimum when it was profiled (:func:`profile`), else +-k
+        standard errors."""
         if name in self.profiles:
-            values, chi2 = self.profiles[name]
-            inside = values[chi2 <= float(np.min(chi2)) + k * k]
-            return (float(inside.min()), float(inside.max()))
+            level = float(np.min(self.profiles[name][1])) + k * k * self.widen.get(name, 1.0)
+            return _profile_interval(*self.profiles[name], level)
         v, s = self.params[name], self.se.get(name, float("nan"))
         if not math.isfinite(s):
             return (float("nan"), float("nan"))
         if self.relative.get(name, True):
             return (v * math.exp(-k * s), v * math.exp(k * s))
         return (v - k * s, v + k * s)
+
+
+def _profile_interval(values: np.ndarray, chi2: np.ndarray, level: float) -> tuple:
+    """(low, high): where the profile ``chi2`` over the grid ``values`` (ascending) last
+    crosses ``level`` on either side, interpolated between grid points (in ln(value) when all
+    values are positive, as the grid is spaced); a grid end when it stays below. A profile
+    with two dips below the level gets the interval spanning both."""
+    values, chi2 = np.asarray(values, float), np.asarray(chi2, float)
+    x = np.log(values) if np.all(values > 0) else values
+    inside = np.flatnonzero(chi2 <= level)
+    if len(inside) == 0:
+        inside = np.array([int(np.argmin(chi2))])
+    ends = []
+    for i, step in ((int(inside[0]), -1), (int(inside[-1]), 1)):
+        j = i + step
+        if 0 <= j < len(x) and chi2[j] > chi2[i]:
+            f = (level - chi2[i]) / (chi2[j] - chi2[i])
+            ends.append(x[i] + f * (x[j] - x[i]))
+        else:
+            ends.append(x[i])
+    lo, hi = min(ends), max(ends)
+    if np.all(values > 0):
+        lo, hi = math.exp(lo), math.exp(hi)
+    return (float(lo), float(hi))
 
 
 def welch_z(diff, se_a, dof_a, se_b, dof_b) -> np.ndarray:
@@ -99,10 +132,12 @@ def misfit(emulator: Emulator, data: Dataset, u: np.ndarray) -> np.ndarray:
 
 
 def fit_emulated(emulator: Emulator, data: Dataset, start: Optional[Sequence[float]] = None,
-                 starts: int = 3) -> EmulatedFit:
+                 starts: int = 3, corr: Optional[np.ndarray] = None) -> EmulatedFit:
     """Minimise chi2 of ``data`` over ``emulator``'s box (see the module docstring), from
     ``start`` (unit position; default the box's centre) and the ``starts`` best design points.
-    The data's observations must be the emulator's outputs, in order."""
+    ``corr``: the correlation of the misfits (-, :mod:`pelletdem.loop_noise`), which turns
+    the standard errors into sandwich ones. The data's observations must be the emulator's
+    outputs, in order."""
     from scipy.optimize import least_squares
 
     d = emulator.space.dim
@@ -123,15 +158,19 @@ def fit_emulated(emulator: Emulator, data: Dataset, start: Optional[Sequence[flo
     z = misfit(emulator, data, u)
     J = best.jac
     try:
-        cov = np.linalg.pinv(J.T @ J)
+        plain = np.linalg.pinv(J.T @ J)
     except np.linalg.LinAlgError:
-        cov = np.full((d, d), np.nan)
-    se, relative = {}, {}
+        plain = np.full((d, d), np.nan)
+    cov = plain if corr is None else plain @ (J.T @ np.asarray(corr, float) @ J) @ plain
+    se, relative, widen = {}, {}, {}
     for k, a in enumerate(emulator.space.axes):
         s = math.sqrt(max(cov[k, k], 0.0)) if np.isfinite(cov[k, k]) else float("nan")
         se[a.name] = s * a.relative_scale()
         relative[a.name] = a.log
-    return EmulatedFit(emulator.space.params(u), u, z, float(np.sum(z ** 2)), se, cov, len(z), relative)
+        ok = np.isfinite(cov[k, k]) and np.isfinite(plain[k, k]) and plain[k, k] > 0
+        widen[a.name] = max(1.0, float(cov[k, k] / plain[k, k])) if ok else 1.0
+    return EmulatedFit(emulator.space.params(u), u, z, float(np.sum(z ** 2)), se, cov, len(z), relative,
+                       widen=widen)
 
 
 def profile(emulator: Emulator, data: Dataset, fit: EmulatedFit, name: str, n: int = 41) -> EmulatedFit:

@@ -19,14 +19,19 @@ import numpy as np
 from .loop_data import Condition, Dataset
 from .loop_emulator import Emulator, Space, design
 from .loop_fit import EmulatedFit, fit_emulated, profile, welch_z
+from .loop_noise import PackingNoise
 from .loop_simulators import Ensemble, Simulator
 
 __all__ = ["ModelFit", "REFINE_ROUNDS", "design_size", "simulate_design", "local_design", "fit_model",
-           "nested_points", "ensemble_z", "chi2_of"]
+           "nested_points", "ensemble_z", "emulator_correlation", "chi2_of"]
 
 
 #: Rounds of refinement of each model's emulator around its fit (at most).
 REFINE_ROUNDS = 3
+
+#: Design points within about this distance of the fit (unit box) inform the packings'
+#: correlation (:mod:`pelletdem.loop_noise`): Gaussian weights of this width.
+NOISE_RADIUS = 0.1
 
 
 def design_size(dim: int) -> int:
@@ -38,9 +43,10 @@ def design_size(dim: int) -> int:
 class ModelFit:
     """A fitted model: ``effects`` switched on (names), its box (``space``), ``emulator`` and
     emulated ``fit``; the fitted parameters simulated on the fit seeds (``direct``) and on the
-    check seeds (``check``), every condition; and the check's misfit z-scores of the fit data
-    (``z_check_fit``) and of the held-out data (``z_check_held``, None without held-out
-    data)."""
+    check seeds (``check``), every condition; the misfit z-scores of the fit data on the fit
+    seeds (``z_direct``) and on the check seeds (``z_check_fit``) and of the held-out data on
+    the check seeds (``z_check_held``, None without held-out data); ``noise``: the packings'
+    correlation between observations (:mod:`pelletdem.loop_noise`) its errors allow for."""
 
     effects: Tuple[str, ...]
     space: Space
@@ -51,6 +57,7 @@ class ModelFit:
     z_direct: np.ndarray
     z_check_fit: np.ndarray
     z_check_held: Optional[np.ndarray]
+    noise: PackingNoise
 
     @property
     def name(self) -> str:
@@ -78,6 +85,13 @@ def ensemble_z(ensembles: Dict[Condition, Ensemble], data: Dataset) -> np.ndarra
     return np.where(np.isfinite(mse[:, 0]), z, np.nan)
 
 
+def emulator_correlation(noise: PackingNoise, emu: Emulator, data: Dataset, k: int) -> np.ndarray:
+    """The correlation (-) of the emulated misfits of ``data``: the emulator's ensemble means
+    carry its noise as standard error, from ``k`` packings."""
+    se = emu.noise()
+    return noise.misfit_correlation(data, se, se * math.sqrt(k))
+
+
 def chi2_of(z: np.ndarray) -> float:
     """sum z^2 over the finite z (inf when any is not finite)."""
     z = np.asarray(z, float)
@@ -86,20 +100,22 @@ def chi2_of(z: np.ndarray) -> float:
 
 def simulate_design(sim: Simulator, space: Space, data: Dataset, seeds: Sequence[int],
                     n: Optional[int] = None,
-                    U: Optional[np.ndarray] = None) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(U, Y, SE): the design positions of ``space`` (default its Sobol design of ``n`` points)
-    and the ensemble means and standard errors of every observation of ``data`` there,
-    simulated on ``seeds``."""
+                    U: Optional[np.ndarray] = None) -> Tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(U, Y, SE, V): the design positions of ``space`` (default its Sobol design of ``n``
+    points), the ensemble means and standard errors of every observation of ``data`` there,
+    simulated on ``seeds``, and each packing's own prediction, V[point, packing, observation]."""
     if U is None:
         U = design(space.dim, n or design_size(space.dim))
     conds = data.conditions
     preds = sim.predict_many([space.params(u) for u in U], conds, tuple(seeds))
     Y = np.empty((len(U), len(data)))
     SE = np.empty_like(Y)
+    V = np.empty((len(U), len(seeds), len(data)))
     for k, p in enumerate(preds):
         for i, o in enumerate(data.observations):
             Y[k, i], SE[k, i] = p[o.condition].mean_se(o)
-    return U, Y, SE
+            V[k, :, i] = p[o.condition].values(o)
+    return U, Y, SE, V
 
 
 def local_design(space: Space, u: np.ndarray, half_width: float, n: int, seed: int) -> np.ndarray:
@@ -120,7 +136,8 @@ def fit_model(sim: Simulator, space: Space, effects: Sequence[str], fit_data: Da
               heldout: Optional[Dataset], fit_seeds: Sequence[int], check_seeds: Sequence[int],
               start: Optional[Dict[str, float]] = None, n_design: Optional[int] = None,
               log: Callable[[str], None] = lambda s: None, refine: int = REFINE_ROUNDS,
-              shared: Optional[Tuple[np.ndarray, np.ndarray, np.ndarray]] = None) -> ModelFit:
+              shared: Optional[Tuple[np.ndarray, np.ndarray, np.ndarray]] = None,
+              noise: Optional[PackingNoise] = None) -> ModelFit:
     """Design, emulate, fit and check one model (see the module docstring). ``start``: a
     starting point (SI) for the fit; the design's best points are tried too. ``refine``: at
     most this many rounds of refinement, each simulating the fitted point and 2 d + 2 points
@@ -128,41 +145,74 @@ def fit_model(sim: Simulator, space: Space, effects: Sequence[str], fit_data: Da
     the richer emulator, until the fit moves less than 0.02 of the box. ``shared``: (U, Y, SE)
     already simulated in this box on the same packings (the nested model's design, its new
     axis at the strength that switches the effect off, :func:`nested_points`), which join
-    the emulator without being simulated again."""
+    the emulator without being simulated again. ``noise``: the packings' correlation between
+    the observations (:mod:`pelletdem.loop_noise`); None estimates it from this model's
+    design. Models that are compared must share one, or their chi2 are not comparable."""
     name = " + ".join(("baseline",) + tuple(effects))
     n_new = design_size(space.dim) if n_design is None else n_design
     log(f"{name}: simulating {n_new} design points on {len(fit_seeds)} packings x "
         f"{len(fit_data.conditions)} conditions")
-    U, Y, SE = simulate_design(sim, space, fit_data, fit_seeds, n_design)
+    U, Y, SE, V = simulate_design(sim, space, fit_data, fit_seeds, n_design)
+    UV, VV = [U], [V]  # the points simulated here, with each packing's prediction
+    k = len(fit_seeds)
+    estimate = noise is None
+    noise = PackingNoise.independent() if noise is None else noise
     if shared is not None:
         U, Y, SE = np.vstack([U, shared[0]]), np.vstack([Y, shared[1]]), np.vstack([SE, shared[2]])
     emu = _emulate(space, U, Y, SE, name)
-    fit = fit_emulated(emu, fit_data, space.unit(start) if start else None)
-    for r in range(refine):
-        Ul = local_design(space, fit.u, 0.15 / 2 ** r, 2 * space.dim + 2, seed=r + 1)
-        _, Yl, SEl = simulate_design(sim, space, fit_data, fit_seeds, U=Ul)
+    fit = fit_emulated(emu, fit_data, space.unit(start) if start else None,
+                       corr=emulator_correlation(noise, emu, fit_data, k))
+    rounds = 0
+
+    def refine_once(fit):
+        nonlocal U, Y, SE, emu, rounds
+        Ul = local_design(space, fit.u, 0.15 / 2 ** rounds, 2 * space.dim + 2, seed=rounds + 1)
+        _, Yl, SEl, Vl = simulate_design(sim, space, fit_data, fit_seeds, U=Ul)
+        UV.append(Ul)
+        VV.append(Vl)
         U, Y, SE = np.vstack([U, Ul]), np.vstack([Y, Yl]), np.vstack([SE, SEl])
         emu = _emulate(space, U, Y, SE, name, emu)
-        new = fit_emulated(emu, fit_data, fit.u)
+        rounds += 1
+        new = fit_emulated(emu, fit_data, fit.u, corr=emulator_correlation(noise, emu, fit_data, k))
         moved = float(np.max(np.abs(new.u - fit.u)))
-        log(f"{name}: refinement {r + 1} ({len(U)} points), the fit moved {moved:.3f} of the box")
-        fit = new
+        log(f"{name}: refinement {rounds} ({len(U)} points), the fit moved {moved:.3f} of the box")
+        return new, moved
+
+    for _ in range(refine):
+        fit, moved = refine_once(fit)
         if moved < 0.02:
             break
+    if estimate:
+        # the packings' correlation where the model was fitted, and the fit's errors with it
+        Ua = np.vstack(UV)
+        w = np.exp(-0.5 * (np.linalg.norm(Ua - fit.u[None, :], axis=1) / NOISE_RADIUS) ** 2)
+        noise = PackingNoise.estimate(fit_data, np.concatenate(VV), w)
+        fit = fit_emulated(emu, fit_data, fit.u, corr=emulator_correlation(noise, emu, fit_data, k))
+        log(f"{name}: the packings' correlation between observations near the fit, from {noise.dof:.0f} degrees "
+            f"of freedom (median |r| within a condition {_median_within(noise):.2f}): the parameters' variances "
+            "widen by " + ", ".join(f"{fit.widen[a]:.2f}" for a in space.names))
     if effects:
-        profile(emu, fit_data, fit, space.names[-1])  # the candidate's strength, added last
+        # the candidate's strength, added last
+        profile(emu, fit_data, fit, space.names[-1])
     failed = ~np.all(np.isfinite(Y), axis=1)
     conds = fit_data.conditions + (heldout.conditions if heldout is not None else [])
     direct = sim.predict(fit.params, conds, tuple(fit_seeds))
     check = sim.predict(fit.params, conds, tuple(check_seeds))
     z_held = ensemble_z(check, heldout) if heldout is not None else None
     mf = ModelFit(tuple(effects), space, emu, fit, direct, check, ensemble_z(direct, fit_data),
-                  ensemble_z(check, fit_data), z_held)
+                  ensemble_z(check, fit_data), z_held, noise)
     log(f"{name}: {len(U)} design points ({int(failed.sum())} failed), emulated chi2/n "
         f"{fit.chi2_per_point:.2f} at " + ", ".join(f"{k} = {fit.params[k]:.4g}" for k in space.names)
         + f"; fresh packings: chi2/n {chi2_of(mf.z_check_fit) / len(fit_data):.2f} fit"
         + (f", {chi2_of(z_held) / len(heldout):.2f} held out" if heldout is not None else ""))
     return mf
+
+
+def _median_within(noise: PackingNoise) -> float:
+    conds = [k[0] for k in noise.keys]
+    n = len(conds)
+    pairs = [abs(noise.corr[i, j]) for i in range(n) for j in range(i + 1, n) if conds[i] == conds[j]]
+    return float(np.median(pairs)) if pairs else 0.0
 
 
 def nested_points(mf: ModelFit, off_unit: float) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:

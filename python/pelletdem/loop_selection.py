@@ -273,11 +273,11 @@ def close_loop(sim: Simulator, data: Dataset, base_bounds: Mapping[str, Sequence
         + (f", {len(heldout)} held out ({', '.join(c.label for c in heldout.conditions)})" if heldout else
            ", none held out (the checks use fresh packings of the fit conditions)"))
 
-    def fit(space: Space, effects, start_params=None, shared=None) -> ModelFit:
+    def fit(space: Space, effects, start_params=None, shared=None, noise=None) -> ModelFit:
         # a candidate's box shares the baseline's points (its off face): fewer new ones serve
         n = n_design if n_design is not None or shared is None else max(8, 2 * space.dim + 2)
         return fit_model(sim, space, effects, fit_data, heldout, fit_seeds, check_seeds, start_params, n, say,
-                         shared=shared)
+                         shared=shared, noise=noise)
 
     window_note = _fit_window(sim, fit_data, say)
     model = fit(Space(axes), (), dict(start) if start else None)
@@ -336,7 +336,7 @@ def close_loop(sim: Simulator, data: Dataset, base_bounds: Mapping[str, Sequence
             axis = Axis(e.param, e.lo, e.hi, e.log)
             space = model.space.with_axis(axis, e.fixed)
             cand = fit(space, model.effects + (e.name,), dict(model.fit.params, **e.settings(s.strength)),
-                       nested_points(model, off_unit(e, axis)))
+                       nested_points(model, off_unit(e, axis)), model.noise)
             drop = model.fit.chi2 - cand.fit.chi2
             after, held_after = _check_chi2(cand), _held_chi2(cand)
             need = max(4.0, min_check_gain * (base_before - n_check))

@@ -68,3 +68,22 @@ def test_fit_emulated_needs_the_emulators_outputs():
     _, emu, data = _emulator_and_data(np.array([0.5, 0.5]))
     with pytest.raises(ValueError, match="outputs"):
         fit_emulated(emu, Dataset(data.observations[:1]))
+
+
+def test_correlated_misfits_widen_the_errors_by_the_sandwich():
+    # two observations of one pellet: correlated misfits carry less than two independent ones
+    space, emu, data = _emulator_and_data(np.array([0.3, 0.6]))
+    plain = fit_emulated(emu, data, start=[0.8, 0.1])
+    same = fit_emulated(emu, data, start=[0.8, 0.1], corr=np.eye(2))
+    assert same.widen == pytest.approx({"E_b": 1.0, "sigma_c": 1.0})
+    assert np.allclose(same.cov, plain.cov)
+    R = np.array([[1.0, 0.8], [0.8, 1.0]])
+    corr = fit_emulated(emu, data, start=[0.8, 0.1], corr=R)
+    assert corr.u == pytest.approx(plain.u, abs=1e-6)  # the fit itself does not change
+    for name in ("E_b", "sigma_c"):
+        assert corr.widen[name] >= 1.0
+        assert corr.se[name] == pytest.approx(plain.se[name] * math.sqrt(corr.widen[name]), rel=1e-6)
+    assert max(corr.widen.values()) > 1.2
+    lo, hi = corr.interval("E_b")
+    lo0, hi0 = plain.interval("E_b")
+    assert lo <= lo0 and hi >= hi0

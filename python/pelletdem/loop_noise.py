@@ -1,0 +1,229 @@
+"""How one packing's luck ties a condition's observations together, and misfits that allow for it.
+
+A pellet that happens to be strong is strong along its whole diametral curve, at its peak and
+in its deformation at failure: the errors of a condition's observations share a cause (which
+packing it was) and are correlated. Summing their squared z-scores as if they were independent
+counts one lucky packing many times: the fit believes its parameters too well (intervals too
+narrow) and a chi2 swings far more than a chi-square of n degrees of freedom does.
+
+:class:`PackingNoise` estimates the correlation of the packings' scatter between observations
+from a model's design: at every design point the same k packings were simulated, so the
+deviations of each packing from its point's mean, pooled over the points near the fit (on log
+values for positive numbers), sample that correlation with (points x (k - 1)) degrees of
+freedom. Within a condition it is modelled by one common factor (the packing's luck) with a
+loading per observation, which tens of degrees of freedom estimate well; between conditions
+the model's shared packings are not relied on. Conditions the design did
+not simulate (held out) borrow the correlation of the nearest fit condition, observation by
+observation (same quantity, nearest position along its curve).
+
+:meth:`PackingNoise.covariance` combines it with the data's own standard errors into the
+covariance of each difference model - data: the model's part follows the packings'
+correlation within a condition; the data's part too, up to the model's packing variance, and
+what of the data's variance exceeds that (measurement noise) stays independent. The fits use
+the resulting correlation of the misfits only linearly, in sandwich standard errors
+(:mod:`pelletdem.loop_fit`), never inverted: inverted, the noise of a correlation estimated
+from tens of packings is amplified (on the engine's pellets it tripled the chi2 of the truth).
+"""
+from __future__ import annotations
+
+import math
+from typing import Dict, List, Optional, Sequence, Tuple
+
+import numpy as np
+
+from .loop_data import Condition, Dataset, Observation
+
+__all__ = ["PackingNoise", "observation_key"]
+
+Key = Tuple[Condition, str, float]
+
+
+def observation_key(o: Observation) -> Key:
+    """(condition, quantity, x): what identifies an observation across datasets."""
+    return (o.condition, o.quantity, round(float(o.x), 12) if math.isfinite(o.x) else math.nan)
+
+
+class PackingNoise:
+    """The correlation (-) of the packings' scatter between the observations ``keys`` (see the
+    module docstring) and one pellet's scatter of each. ``corr``: (m, m) matrix; ``sd``: the
+    pooled SD of one packing's prediction, relative (of ln) where ``log`` is set, else in the
+    observation's unit; ``dof``: the degrees of freedom both were estimated with (0 for the
+    independent model)."""
+
+    def __init__(self, keys: Sequence[Key], corr: np.ndarray, dof: float = 0.0,
+                 sd: Optional[np.ndarray] = None, log: Optional[np.ndarray] = None):
+        self.keys = tuple(keys)
+        m = len(self.keys)
+        self.corr = np.asarray(corr, float).reshape(m, m)
+        self.dof = float(dof)
+        self.sd = np.full(m, np.nan) if sd is None else np.asarray(sd, float).reshape(m)
+        self.log = np.zeros(m, bool) if log is None else np.asarray(log, bool).reshape(m)
+        self._index = {k: i for i, k in enumerate(self.keys)}
+
+    @classmethod
+    def independent(cls) -> "PackingNoise":
+        """No correlation between any observations."""
+        return cls((), np.zeros((0, 0)))
+
+    def packing_sd(self, data: Dataset, means: np.ndarray) -> np.ndarray:
+        """One pellet's packing scatter (SD, the observations' units) of each observation of
+        ``data`` where the model predicts ``means``: the pooled estimate of the observation or
+        of its counterpart (NaN where there is none). A pooled SD has hundreds of degrees of
+        freedom where an ensemble's own has k - 1, and its correlations are estimated with it:
+        the two belong together."""
+        out = np.full(len(data), np.nan)
+        for i, a in enumerate(self._mapping(data)):
+            if a is not None and math.isfinite(self.sd[a]):
+                out[i] = self.sd[a] * abs(float(means[i])) if self.log[a] else self.sd[a]
+        return out
+
+    @classmethod
+    def estimate(cls, data: Dataset, members: np.ndarray, weights: Optional[np.ndarray] = None) -> "PackingNoise":
+        """The correlation from ``members`` (points, k, m): each design point's k packings'
+        predictions of ``data``'s m observations (their units; NaN where a simulation failed,
+        which drops that point), each point's deviations weighted by ``weights`` (points,
+        default equal). Weight the points near the fitted parameters: a curve point at a fixed
+        dL/D lies before the peak at one parameter set and after it at another, and its
+        scatter and correlations change with that."""
+        V = np.asarray(members, float)
+        if V.ndim != 3 or V.shape[2] != len(data):
+            raise ValueError(f"members of shape {V.shape} do not match {len(data)} observations")
+        w = np.ones(len(V)) if weights is None else np.asarray(weights, float).reshape(len(V))
+        ok = np.all(np.isfinite(V), axis=(1, 2)) & np.isfinite(w) & (w > 0)
+        V, w = V[ok], w[ok]
+        g, k, m = V.shape
+        if g == 0 or k < 2:
+            return cls.independent()
+        w = w / w.sum()
+        positive = np.all(V > 0, axis=(0, 1))
+        V = np.where(positive[None, None, :], np.log(np.where(V > 0, V, 1.0)), V)
+        dev = (V - V.mean(axis=1, keepdims=True)) * math.sqrt(k / (k - 1.0))
+        # rows scaled so that their plain mean square is the weighted one
+        dev = (dev * np.sqrt(w * g)[:, None, None]).reshape(g * k, m)
+        sd = np.sqrt(np.mean(dev * dev, axis=0))
+        varying = sd > 1e-12 * np.maximum(1.0, np.abs(V).mean(axis=(0, 1)))
+        E = np.zeros_like(dev)
+        E[:, varying] = dev[:, varying] / sd[varying]
+        sample = E.T @ E / len(E)
+        dof = (k - 1.0) / float(np.sum(w * w))  # effective points x (k - 1)
+        corr = np.eye(m)
+        conds = [o.condition for o in data.observations]
+        for c in dict.fromkeys(conds):
+            idx = np.array([i for i in range(m) if conds[i] == c and varying[i]], int)
+            if len(idx) >= 2:
+                corr[np.ix_(idx, idx)] = _one_factor(sample[np.ix_(idx, idx)])
+        return cls([observation_key(o) for o in data.observations], corr, dof, sd, positive)
+
+    def _mapping(self, data: Dataset) -> List[Optional[int]]:
+        """Each observation of ``data`` as an index into :attr:`keys` (None: no counterpart)."""
+        out: List[Optional[int]] = []
+        by_cond: Dict[Condition, List[int]] = {}
+        for i, (c, _, _) in enumerate(self.keys):
+            by_cond.setdefault(c, []).append(i)
+        reach: Dict[Tuple[Condition, str], float] = {}
+        for dataset_keys in (self.keys, [observation_key(o) for o in data.observations]):
+            for c, q, x in dataset_keys:
+                if math.isfinite(x):
+                    reach[(c, q)] = max(reach.get((c, q), 0.0), abs(x))
+        for o in data.observations:
+            key = observation_key(o)
+            if key in self._index:
+                out.append(self._index[key])
+                continue
+            c = o.condition
+            near = sorted((cc for cc in by_cond if cc.material == c.material),
+                          key=lambda cc: (abs(cc.mc - c.mc), abs(math.log(cc.sigma_z / c.sigma_z))))
+            pick = None
+            for cc in near:
+                same = [i for i in by_cond[cc] if self.keys[i][1] == o.quantity]
+                if not same:
+                    continue
+                if not math.isfinite(o.x):
+                    pick = same[0]
+                else:
+                    pos = o.x / max(reach.get((c, o.quantity), 0.0), 1e-300)
+                    pick = min(same, key=lambda i: abs(self.keys[i][2] / max(reach[(cc, o.quantity)], 1e-300)
+                                                       - pos) if math.isfinite(self.keys[i][2]) else math.inf)
+                break
+            out.append(pick)
+        return out
+
+    def correlation(self, data: Dataset) -> Tuple[np.ndarray, np.ndarray]:
+        """(R, same): the packings' correlation between ``data``'s observations (-) and whether
+        two observations belong to one condition (bool). Observations of conditions the
+        estimate never saw take their counterparts' correlation within their own condition;
+        two such conditions that share a counterpart are taken as independent."""
+        n = len(data)
+        idx = self._mapping(data)
+        conds = [o.condition for o in data.observations]
+        same = np.array([[conds[i] == conds[j] for j in range(n)] for i in range(n)], bool)
+        R = np.eye(n)
+        for i in range(n):
+            for j in range(i + 1, n):
+                a, b = idx[i], idx[j]
+                if a is None or b is None or a == b:
+                    continue
+                exact = self.keys[a][0] == conds[i] and self.keys[b][0] == conds[j]
+                one_source = self.keys[a][0] == self.keys[b][0]
+                if exact or (same[i, j] and one_source) or (not same[i, j] and not one_source):
+                    R[i, j] = R[j, i] = self.corr[a, b]
+        return R, same
+
+    def covariance(self, data: Dataset, model_se: np.ndarray, model_sd: Optional[np.ndarray] = None,
+                   data_scale: float = 1.0, model_scale: float = 1.0) -> np.ndarray:
+        """Covariance (units of ``data``, squared) of the differences model - data for
+        ``data``'s observations, against a model whose means carry the standard errors
+        ``model_se`` (per observation), one pellet's packing scatter being ``model_sd``
+        (default: the data's replicate SD). The data's replicate variance up to the model's
+        packing variance is correlated within a condition; the rest of it (measurement noise)
+        is independent. ``data_scale`` / ``model_scale``: the data's replicates / the model's
+        packings multiplied by these (their variances divided)."""
+        R, same = self.correlation(data) if len(self.keys) else (np.eye(len(data)), None)
+        m = np.nan_to_num(np.asarray(model_se, float))
+        sd, n = data.sds, np.array([o.n for o in data.observations], float)
+        pack = sd if model_sd is None else np.minimum(np.nan_to_num(np.asarray(model_sd, float)), sd)
+        c = pack / np.sqrt(n)                                   # the data's packing part of its SE
+        e2 = np.maximum(data.standard_errors ** 2 - c * c, 0.0)  # and the independent rest
+        data_part = np.outer(c, c) * R if same is None else np.where(same, np.outer(c, c) * R, 0.0)
+        return (data_part + np.diag(e2)) / data_scale + np.outer(m, m) * R / model_scale
+
+    def misfit_correlation(self, data: Dataset, model_se: np.ndarray,
+                           model_sd: Optional[np.ndarray] = None) -> np.ndarray:
+        """The correlation (-) of ``data``'s misfit z-scores against a model (arguments as in
+        :meth:`covariance`)."""
+        C = self.covariance(data, model_se, model_sd)
+        d = np.sqrt(np.maximum(np.diag(C), 1e-300))
+        return C / np.outer(d, d)
+
+
+#: The largest loading of one observation on its pellet's common factor: no observation is
+#: taken as all luck of the packing.
+MAX_LOADING = 0.95
+
+
+def _one_factor(sample: np.ndarray) -> np.ndarray:
+    """A one-factor correlation lambda lambda^T (unit diagonal) from a sample correlation, the
+    loadings lambda clipped to |lambda| <= MAX_LOADING. One
+    factor, a pellet's luck (how strong its packing came out), carries most of the shared
+    scatter, and its loadings are estimated well from tens of degrees of freedom where a full
+    correlation matrix is not: the rest of a sample correlation from so few is noise that a
+    whitening would amplify."""
+    # principal-axis factoring: the leading eigenpair of the correlation with the shared
+    # variances (communalities) on its diagonal, iterated; the plain leading eigenvector would
+    # count each observation's own scatter as shared and overstate the loadings
+    S = np.array(sample, float)
+    off = np.abs(S - np.diag(np.diag(S)))
+    h = off.max(axis=1) if len(S) > 1 else np.zeros(len(S))
+    lam = np.zeros(len(S))
+    for _ in range(50):
+        np.fill_diagonal(S, h)
+        w, Q = np.linalg.eigh(S)
+        lam = np.clip(math.sqrt(max(float(w[-1]), 0.0)) * Q[:, -1], -MAX_LOADING, MAX_LOADING)
+        if np.max(np.abs(lam * lam - h)) < 1e-6:
+            break
+        h = lam * lam
+    R = np.outer(lam, lam)
+    np.fill_diagonal(R, 1.0)
+    return R
+
+
