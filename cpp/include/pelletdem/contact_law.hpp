@@ -85,6 +85,9 @@ struct ContactKinematics {
   double load_cap = kHuge;  // largest loading-branch force (crushing), N
 };
 
+// Overlap / radius up to which a crushing contact's loading force stays at its cap (-).
+inline constexpr double kCrushedDepth = 0.5;
+
 struct ContactForce {
   double fn;  // normal force on the second body along n, N (> 0 repulsive)
   Vec3 ft;    // tangential force on the second body, N
@@ -146,7 +149,11 @@ class HystereticLaw {
     const double k1 = s * p_.k1, k2 = s * p_.k2, kc = s * p_.kc * adhesion_scale;
     const double k2e = unloading_stiffness(k2, delta0, r_eff);
     const double f_elastic = k2e * (delta - delta0);
-    const double f_load = std::min(loading_force(delta, k1, r_eff), load_cap);
+    // a capped (crushing) loading branch stiffens again once the particle is crushed to
+    // kCrushedDepth of its radius: the debris under the plate is compacted, and a plate that
+    // met constant force forever would pass through the particle
+    const double cap = load_cap < kHuge ? load_cap + k1 * std::max(0.0, delta - kCrushedDepth * r_eff) : kHuge;
+    const double f_load = std::min(loading_force(delta, k1, r_eff), cap);
     if (f_elastic >= f_load) {
       delta0 = residual_for(delta, f_load, k2, r_eff);
       return f_load;

@@ -2,7 +2,8 @@
 // Crushing where the diametral plates touch the pellet: on walls marked crushable (the plates)
 // the loading branch is capped at plate_yield_stress pi r^2, so a particle under a plate
 // flattens at constant force instead of stiffening: a longer toe of sigma_1(dL/D), failure at
-// larger dL/D, little change of the peak.
+// larger dL/D, little change of the peak. Past kCrushedDepth of its radius (contact_law.hpp)
+// the crushed particle stiffens again.
 #include "pelletdem/effect.hpp"
 
 #define PELLETDEM_ROWS_PlateCrushing(X)                                                    \
