@@ -152,7 +152,8 @@ class HystereticLaw {
     // a capped (crushing) loading branch stiffens again once the particle is crushed to
     // kCrushedDepth of its radius: the debris under the plate is compacted, and a plate that
     // met constant force forever would pass through the particle
-    const double cap = load_cap < kHuge ? load_cap + k1 * std::max(0.0, delta - kCrushedDepth * r_eff) : kHuge;
+    const double cap =
+        load_cap < kHuge ? load_cap + k1 * std::max(0.0, delta - kCrushedDepth * r_eff) : kHuge;
     const double f_load = std::min(loading_force(delta, k1, r_eff), cap);
     if (f_elastic >= f_load) {
       delta0 = residual_for(delta, f_load, k2, r_eff);
