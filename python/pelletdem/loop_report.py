@@ -182,9 +182,13 @@ def write_report(res: LoopResult, out_dir: str, title: str = "Discrepancy loop")
          "difference between the model's mean over its packings and the measured mean, over both standard "
          "errors; about 1 when the model is right. RRMSE: eq. 16.", ""]
     for k, st in enumerate(res.steps):
+        widen = st.model.fit.widen
+        shared = (" The errors allow for the misfits of one condition's observations being correlated (they share "
+                  "their pellets' packings): variances x" + ", x".join(f"{widen[a]:.2f}" for a in st.model.space.names)
+                  + ".") if widen and max(widen.values()) > 1.0 else ""
         L += [f"## Step {k + 1}: {st.model.name}", "", f"Fitted (emulated chi2 {st.model.fit.chi2:.1f} on "
-              f"{st.model.fit.n} numbers, {len(st.model.emulator.U)} design points): {_params(st.model)}.", "",
-              "Residual:", ""]
+              f"{st.model.fit.n} numbers, {len(st.model.emulator.U)} design points): {_params(st.model)}.{shared}",
+              "", "Residual:", ""]
         L += ["    " + s for s in st.residual.lines()]
         if st.screens:
             L += ["", f"Screening (fit test threshold {st.threshold:.1f}):", "", screens_table(st.screens, res.power)]

@@ -147,3 +147,14 @@ def test_a_simulator_that_cannot_widen_says_so_in_the_verdict():
     sim.widen = None  # a simulator that cannot widen its window
     res = close_loop(sim, data, BOUNDS, START, held_out=lambda c: c in HELD, library=LIBRARY, max_effects=0)
     assert "beyond the simulated test window" in res.verdict
+
+
+def test_the_report_says_how_much_shared_packings_widen_the_errors(tmp_path):
+    from pelletdem.loop_report import write_report
+
+    res = toy_loop({}, 0)
+    widen = res.baseline.fit.widen
+    assert set(widen) == set(BOUNDS) and min(widen.values()) >= 1.0
+    text = open(write_report(res, str(tmp_path), "toy")).read()
+    assert "share their pellets' packings" in text
+    assert "variances x" + ", x".join(f"{widen[a]:.2f}" for a in BOUNDS) in text
