@@ -45,37 +45,20 @@ def observation_key(o: Observation) -> Key:
 
 class PackingNoise:
     """The correlation (-) of the packings' scatter between the observations ``keys`` (see the
-    module docstring) and one pellet's scatter of each. ``corr``: (m, m) matrix; ``sd``: the
-    pooled SD of one packing's prediction, relative (of ln) where ``log`` is set, else in the
-    observation's unit; ``dof``: the degrees of freedom both were estimated with (0 for the
-    independent model)."""
+    module docstring): ``corr``, an (m, m) matrix, estimated with ``dof`` degrees of freedom
+    (0 for the independent model)."""
 
-    def __init__(self, keys: Sequence[Key], corr: np.ndarray, dof: float = 0.0,
-                 sd: Optional[np.ndarray] = None, log: Optional[np.ndarray] = None):
+    def __init__(self, keys: Sequence[Key], corr: np.ndarray, dof: float = 0.0):
         self.keys = tuple(keys)
         m = len(self.keys)
         self.corr = np.asarray(corr, float).reshape(m, m)
         self.dof = float(dof)
-        self.sd = np.full(m, np.nan) if sd is None else np.asarray(sd, float).reshape(m)
-        self.log = np.zeros(m, bool) if log is None else np.asarray(log, bool).reshape(m)
         self._index = {k: i for i, k in enumerate(self.keys)}
 
     @classmethod
     def independent(cls) -> "PackingNoise":
         """No correlation between any observations."""
         return cls((), np.zeros((0, 0)))
-
-    def packing_sd(self, data: Dataset, means: np.ndarray) -> np.ndarray:
-        """One pellet's packing scatter (SD, the observations' units) of each observation of
-        ``data`` where the model predicts ``means``: the pooled estimate of the observation or
-        of its counterpart (NaN where there is none). A pooled SD has hundreds of degrees of
-        freedom where an ensemble's own has k - 1, and its correlations are estimated with it:
-        the two belong together."""
-        out = np.full(len(data), np.nan)
-        for i, a in enumerate(self._mapping(data)):
-            if a is not None and math.isfinite(self.sd[a]):
-                out[i] = self.sd[a] * abs(float(means[i])) if self.log[a] else self.sd[a]
-        return out
 
     @classmethod
     def estimate(cls, data: Dataset, members: np.ndarray, weights: Optional[np.ndarray] = None) -> "PackingNoise":
@@ -112,7 +95,7 @@ class PackingNoise:
             idx = np.array([i for i in range(m) if conds[i] == c and varying[i]], int)
             if len(idx) >= 2:
                 corr[np.ix_(idx, idx)] = _one_factor(sample[np.ix_(idx, idx)])
-        return cls([observation_key(o) for o in data.observations], corr, dof, sd, positive)
+        return cls([observation_key(o) for o in data.observations], corr, dof)
 
     def _mapping(self, data: Dataset) -> List[Optional[int]]:
         """Each observation of ``data`` as an index into :attr:`keys` (None: no counterpart)."""
@@ -148,11 +131,10 @@ class PackingNoise:
             out.append(pick)
         return out
 
-    def correlation(self, data: Dataset) -> Tuple[np.ndarray, np.ndarray]:
-        """(R, same): the packings' correlation between ``data``'s observations (-) and whether
-        two observations belong to one condition (bool). Observations of conditions the
-        estimate never saw take their counterparts' correlation within their own condition;
-        two such conditions that share a counterpart are taken as independent."""
+    def correlation(self, data: Dataset) -> np.ndarray:
+        """The packings' correlation between ``data``'s observations (-). Observations of conditions the
+        estimate never saw take their counterparts' correlation; between conditions nothing
+        is relied on (R = 0)."""
         n = len(data)
         idx = self._mapping(data)
         conds = [o.condition for o in data.observations]
@@ -161,31 +143,26 @@ class PackingNoise:
         for i in range(n):
             for j in range(i + 1, n):
                 a, b = idx[i], idx[j]
-                if a is None or b is None or a == b:
+                if a is None or b is None or a == b or not same[i, j]:
                     continue
-                exact = self.keys[a][0] == conds[i] and self.keys[b][0] == conds[j]
-                one_source = self.keys[a][0] == self.keys[b][0]
-                if exact or (same[i, j] and one_source) or (not same[i, j] and not one_source):
+                if self.keys[a][0] == self.keys[b][0]:
                     R[i, j] = R[j, i] = self.corr[a, b]
-        return R, same
+        return R
 
-    def covariance(self, data: Dataset, model_se: np.ndarray, model_sd: Optional[np.ndarray] = None,
-                   data_scale: float = 1.0, model_scale: float = 1.0) -> np.ndarray:
+    def covariance(self, data: Dataset, model_se: np.ndarray, model_sd: Optional[np.ndarray] = None) -> np.ndarray:
         """Covariance (units of ``data``, squared) of the differences model - data for
         ``data``'s observations, against a model whose means carry the standard errors
         ``model_se`` (per observation), one pellet's packing scatter being ``model_sd``
         (default: the data's replicate SD). The data's replicate variance up to the model's
         packing variance is correlated within a condition; the rest of it (measurement noise)
-        is independent. ``data_scale`` / ``model_scale``: the data's replicates / the model's
-        packings multiplied by these (their variances divided)."""
-        R, same = self.correlation(data) if len(self.keys) else (np.eye(len(data)), None)
+        is independent."""
+        R = self.correlation(data)
         m = np.nan_to_num(np.asarray(model_se, float))
         sd, n = data.sds, np.array([o.n for o in data.observations], float)
         pack = sd if model_sd is None else np.minimum(np.nan_to_num(np.asarray(model_sd, float)), sd)
         c = pack / np.sqrt(n)                                   # the data's packing part of its SE
         e2 = np.maximum(data.standard_errors ** 2 - c * c, 0.0)  # and the independent rest
-        data_part = np.outer(c, c) * R if same is None else np.where(same, np.outer(c, c) * R, 0.0)
-        return (data_part + np.diag(e2)) / data_scale + np.outer(m, m) * R / model_scale
+        return np.outer(c, c) * R + np.diag(e2) + np.outer(m, m) * R
 
     def misfit_correlation(self, data: Dataset, model_se: np.ndarray,
                            model_sd: Optional[np.ndarray] = None) -> np.ndarray:

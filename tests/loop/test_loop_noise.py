@@ -39,14 +39,12 @@ def _members(R, sd_rel, g, k, rng, mean=1e6):
     return mean * level * np.exp(e)
 
 
-def test_estimate_recovers_a_one_factor_correlation_and_the_scatter():
+def test_estimate_recovers_a_one_factor_correlation():
     rng = np.random.default_rng(1)
     data = Dataset(_curve(C60))
     noise = PackingNoise.estimate(data, _members(_factor(LOADINGS), 0.05, 200, 4, rng))
     assert noise.dof == pytest.approx(600)
     assert np.max(np.abs(noise.corr - _factor(LOADINGS))) < 0.08
-    assert np.allclose(noise.sd, 0.05, rtol=0.08)
-    assert np.all(noise.log)
 
 
 def test_the_conditions_are_estimated_apart():
@@ -66,7 +64,6 @@ def test_estimate_weights_the_points_near_the_fit():
     w = np.r_[np.ones(100), np.full(100, 1e-9)]
     noise = PackingNoise.estimate(data, np.concatenate([near, far]), w)
     assert np.max(np.abs(noise.corr - _factor(LOADINGS))) < 0.1
-    assert np.allclose(noise.sd, 0.05, rtol=0.1)
     assert noise.dof == pytest.approx(300, rel=0.01)
 
 
@@ -103,14 +100,11 @@ def test_the_data_part_is_correlated_within_a_condition_only_and_keeps_its_own_n
 def test_a_held_out_condition_borrows_the_nearest_fit_conditions_correlation():
     fit = Dataset(_curve(C60) + _curve(C120))
     R = np.kron(np.eye(2), _factor(LOADINGS))
-    noise = PackingNoise([(o.condition, o.quantity, round(o.x, 12)) for o in fit.observations], R, 1e3,
-                         np.full(12, 0.05), np.ones(12, bool))
-    held = Dataset(_curve(C90, m=6))
-    Rh, same = noise.correlation(held)
-    assert np.all(same)
-    assert np.allclose(Rh, _factor(LOADINGS))
-    assert np.allclose(noise.packing_sd(held, held.values), 0.05 * held.values)
+    noise = PackingNoise([(o.condition, o.quantity, round(o.x, 12)) for o in fit.observations], R, 1e3)
+    assert np.allclose(noise.correlation(Dataset(_curve(C90, m=6))), _factor(LOADINGS))
+    # two held-out conditions are not tied to each other through their counterparts
+    both = noise.correlation(Dataset(_curve(C90) + _curve(Condition(100e6))))
+    assert np.allclose(both[:6, 6:], 0.0) and np.allclose(both[6:, 6:], _factor(LOADINGS))
     # an observation with no counterpart is independent of the rest
     odd = Dataset(_curve(C90, m=3) + [Observation(C90, "bulk_density", float("nan"), 500.0, 5.0, 5)])
-    Ro, _ = noise.correlation(odd)
-    assert np.allclose(Ro[3, :3], 0.0) and np.isnan(noise.packing_sd(odd, odd.values)[3])
+    assert np.allclose(noise.correlation(odd)[3, :3], 0.0)
