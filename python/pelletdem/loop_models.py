@@ -147,7 +147,8 @@ def fit_model(sim: Simulator, space: Space, effects: Sequence[str], fit_data: Da
     axis at the strength that switches the effect off, :func:`nested_points`), which join
     the emulator without being simulated again. ``noise``: the packings' correlation between
     the observations (:mod:`pelletdem.loop_noise`); None estimates it from this model's
-    design. Models that are compared must share one, or their chi2 are not comparable."""
+    design (after the refinement, near the fit); a candidate takes its baseline's, so the
+    two models' errors allow for the same correlation."""
     name = " + ".join(("baseline",) + tuple(effects))
     n_new = design_size(space.dim) if n_design is None else n_design
     log(f"{name}: simulating {n_new} design points on {len(fit_seeds)} packings x "
@@ -162,24 +163,17 @@ def fit_model(sim: Simulator, space: Space, effects: Sequence[str], fit_data: Da
     emu = _emulate(space, U, Y, SE, name)
     fit = fit_emulated(emu, fit_data, space.unit(start) if start else None,
                        corr=emulator_correlation(noise, emu, fit_data, k))
-    rounds = 0
-
-    def refine_once(fit):
-        nonlocal U, Y, SE, emu, rounds
-        Ul = local_design(space, fit.u, 0.15 / 2 ** rounds, 2 * space.dim + 2, seed=rounds + 1)
+    for r in range(refine):
+        Ul = local_design(space, fit.u, 0.15 / 2 ** r, 2 * space.dim + 2, seed=r + 1)
         _, Yl, SEl, Vl = simulate_design(sim, space, fit_data, fit_seeds, U=Ul)
         UV.append(Ul)
         VV.append(Vl)
         U, Y, SE = np.vstack([U, Ul]), np.vstack([Y, Yl]), np.vstack([SE, SEl])
         emu = _emulate(space, U, Y, SE, name, emu)
-        rounds += 1
         new = fit_emulated(emu, fit_data, fit.u, corr=emulator_correlation(noise, emu, fit_data, k))
         moved = float(np.max(np.abs(new.u - fit.u)))
-        log(f"{name}: refinement {rounds} ({len(U)} points), the fit moved {moved:.3f} of the box")
-        return new, moved
-
-    for _ in range(refine):
-        fit, moved = refine_once(fit)
+        log(f"{name}: refinement {r + 1} ({len(U)} points), the fit moved {moved:.3f} of the box")
+        fit = new
         if moved < 0.02:
             break
     if estimate:
