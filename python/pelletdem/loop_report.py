@@ -157,7 +157,7 @@ def summary(res: LoopResult) -> dict:
                        "trials": [{"effect": t.effect.name, "accepted": t.accepted, "why": t.why,
                                    "delta_chi2": t.delta_chi2, "check_before": t.check_before,
                                    "check_after": t.check_after, "model": model(t.model)} for t in st.trials],
-                       "added": st.added} for st in res.steps],
+                       "added": st.added, "rivals": list(st.rivals)} for st in res.steps],
             "power": {k: {"detectable": p.detectable, "replicates": p.replicates, "packings": p.packings,
                           "statement": p.statement} for k, p in res.power.items()},
             "n_simulations": res.n_simulations, "wall_time_s": res.wall_time_s}
@@ -195,6 +195,9 @@ def write_report(res: LoopResult, out_dir: str, title: str = "Discrepancy loop")
         for t in st.trials:
             L += ["", f"- **{t.effect.name}** {'added' if t.accepted else 'not added'}: {t.why}. Fitted: "
                   f"{_params(t.model)}."]
+        if st.rivals:
+            L += ["", f"- {st.added} and {' and '.join(st.rivals)} fit within a chi2 of 2 of each other (their BIC "
+                  f"difference): these data do not tell them apart; {st.added} was added for the larger fall."]
         L.append("")
     if "screen" in figs:
         L += [f"![screening]({os.path.basename(figs['screen'])})", ""]

@@ -60,6 +60,11 @@ FIT_SEEDS = (0, 1, 2, 3)
 CHECK_SEEDS = (100, 101, 102, 103)
 #: The widest diametral test window (dL/D) the loop widens to.
 MAX_WINDOW = 0.5
+#: Two accepted candidates whose fits differ by less than this in chi2 (each adds one
+#: parameter, so this is their BIC difference) are not told apart by the data: under 2 is "not
+#: worth more than a bare mention" (Kass and Raftery 1995). The better one is added and the
+#: other named beside it.
+TIE_CHI2 = 2.0
 
 
 @dataclass
@@ -80,7 +85,8 @@ class Trial:
 @dataclass
 class Step:
     """One round of forward selection: the ``model`` it started from, its ``residual``, the
-    ``screens``, the ``trials`` and the effect ``added`` (None when none was)."""
+    ``screens``, the ``trials``, the effect ``added`` (None when none was) and its ``rivals``:
+    other accepted candidates that fit within :data:`TIE_CHI2` of it."""
 
     model: ModelFit
     residual: ResidualSummary
@@ -89,6 +95,7 @@ class Step:
     added: Optional[str]
     threshold: float
     note: str = ""
+    rivals: List[str] = field(default_factory=list)
 
 
 @dataclass
@@ -358,7 +365,10 @@ def close_loop(sim: Simulator, data: Dataset, base_bounds: Mapping[str, Sequence
             say(f"{e.name}: {'accepted' if ok else 'not accepted'}: {why}")
         accepted = [t for t in trials if t.accepted]
         added = max(accepted, key=lambda t: t.delta_chi2) if accepted else None
-        steps.append(Step(model, residual, screens, trials, added.effect.name if added else None, threshold))
+        rivals = [t.effect.name for t in accepted if added is not None and t is not added
+                  and added.delta_chi2 - t.delta_chi2 < TIE_CHI2]
+        steps.append(Step(model, residual, screens, trials, added.effect.name if added else None, threshold,
+                          rivals=rivals))
         if added is None:
             break
         chosen.append(added.effect.name)
@@ -373,7 +383,11 @@ def close_loop(sim: Simulator, data: Dataset, base_bounds: Mapping[str, Sequence
 
 def _verdict(chosen: Sequence[str], steps: Sequence[Step], baseline: ModelFit) -> str:
     if chosen:
-        return "added " + ", then ".join(chosen)
+        def named(st: Step) -> str:
+            if not st.rivals:
+                return str(st.added)
+            return f"{st.added} ({' or '.join(st.rivals)} fits as well: these data do not tell them apart)"
+        return "added " + ", then ".join(named(st) for st in steps if st.added)
     first = steps[0]
     if first.note:
         return "nothing added: " + first.note

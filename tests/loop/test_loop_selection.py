@@ -158,3 +158,24 @@ def test_the_report_says_how_much_shared_packings_widen_the_errors(tmp_path):
     text = open(write_report(res, str(tmp_path), "toy")).read()
     assert "share their pellets' packings" in text
     assert "variances x" + ", x".join(f"{widen[a]:.2f}" for a in BOUNDS) in text
+
+
+def test_candidates_the_data_cannot_tell_apart_are_both_named(tmp_path):
+    # a twin of the hidden effect (the same law under another name) fits exactly as well: the
+    # loop adds one and says the other is as good, in the verdict and the report
+    import dataclasses
+
+    from pelletdem.loop_report import write_report
+
+    library = {"trend": LIBRARY["trend"], "twin": dataclasses.replace(LIBRARY["trend"], name="twin")}
+    sim = FunctionSimulator(toy)
+    data = synthetic_dataset(sim, {**TRUTH, **LIBRARY["trend"].settings(HIDDEN["trend"])}, FIT + HELD,
+                             noise=0.02, compaction_points=4, seeds=[1000 + k for k in range(5)], seed=0)
+    res = close_loop(sim, data, BOUNDS, START, held_out=lambda c: c in HELD, library=library)
+    assert res.chosen == ["trend"], "\n".join(res.log)
+    assert res.steps[0].rivals == ["twin"]
+    assert res.verdict.startswith("added trend (twin fits as well: these data do not tell them apart)")
+    text = open(write_report(res, str(tmp_path), "toy")).read()
+    assert "these data do not tell them apart; trend was added" in text
+    # a clear winner has no rival
+    assert toy_loop(LIBRARY["trend"].settings(HIDDEN["trend"]), 0).steps[0].rivals == []
