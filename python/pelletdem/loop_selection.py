@@ -44,7 +44,7 @@ from typing import Callable, Dict, List, Mapping, Optional, Sequence
 import numpy as np
 from scipy import stats
 
-from .effects import EFFECTS, Effect
+from .effects import EFFECTS, Effect, clash
 from .loop_data import Condition, Dataset
 from .loop_emulator import Axis, Space
 from .loop_models import ModelFit, chi2_of, fit_model, nested_points
@@ -313,7 +313,13 @@ def close_loop(sim: Simulator, data: Dataset, base_bounds: Mapping[str, Sequence
     n_rep = int(np.median([o.n for o in fit_data.observations]))
     while True:
         residual = describe_residual(fit_data, model.z_direct, model.n_params)
-        remaining = [e for name, e in library.items() if name not in chosen]
+        remaining = []
+        for name, e in library.items():
+            why = clash([library[c] for c in chosen] + [e]) if chosen and name not in chosen else ""
+            if why:
+                say(f"{name} is not tried with {', '.join(chosen)}: {why}")
+            elif name not in chosen:
+                remaining.append(e)
         if not remaining or len(chosen) >= max_effects:
             steps.append(Step(model, residual, [], [], None, math.nan))
             break

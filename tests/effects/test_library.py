@@ -58,3 +58,12 @@ def test_an_effect_must_name_a_row_with_its_unit_and_default():
         Effect("x", "contact.plate_yield_stress", "-", 0.1, 1.0, 0.5, True, 0.0, "diametral", "", "")
     with pytest.raises(ValueError, match="defaults"):
         Effect("x", "bond.softening", "-", 0.1, 1.0, 0.5, True, 1.0, "diametral", "", "")
+
+
+def test_effects_that_cannot_be_on_together_say_why():
+    from pelletdem.effects import clash
+
+    both = clash([EFFECTS["unloading_growth"], EFFECTS["saturating_unloading"]])
+    assert "unloading stiffness" in both
+    assert clash([EFFECTS["unloading_growth"], EFFECTS["hardening"], EFFECTS["weibull_strength"]]) == ""
+    assert clash([]) == ""

@@ -179,3 +179,19 @@ def test_candidates_the_data_cannot_tell_apart_are_both_named(tmp_path):
     assert "these data do not tell them apart; trend was added" in text
     # a clear winner has no rival
     assert toy_loop(LIBRARY["trend"].settings(HIDDEN["trend"]), 0).steps[0].rivals == []
+
+
+def test_a_candidate_that_cannot_join_the_added_effect_is_not_tried_with_it():
+    # the engine refuses two laws of the unloading stiffness at once: once one is added, the
+    # other is left out of the next round (not simulated, which would stop the loop)
+    from pelletdem.effects import EFFECTS
+
+    sat = EFFECTS["saturating_unloading"]
+    library = {"springback": LIBRARY["springback"], "saturating": sat}
+    sim = FunctionSimulator(toy)
+    data = synthetic_dataset(sim, {**TRUTH, **LIBRARY["springback"].settings(HIDDEN["springback"])}, FIT + HELD,
+                             noise=0.02, compaction_points=4, seeds=[1000 + k for k in range(5)], seed=0)
+    res = close_loop(sim, data, BOUNDS, START, held_out=lambda c: c in HELD, library=library)
+    assert res.chosen == ["springback"], "\n".join(res.log)
+    assert any(line.startswith("saturating is not tried with springback: two effects that shape the unloading")
+               for line in res.log), "\n".join(res.log)

@@ -21,9 +21,9 @@ import importlib
 import pkgutil
 from typing import Dict, Tuple
 
-from .base import Effect
+from .base import Effect, clash
 
-__all__ = ["Effect", "EFFECTS", "effect_names"]
+__all__ = ["Effect", "EFFECTS", "effect_names", "clash"]
 
 
 def _discover() -> Dict[str, Effect]:

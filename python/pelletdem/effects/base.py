@@ -3,11 +3,11 @@ probe of its strength, the stage after which it acts and the residual signature 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Dict, Mapping
+from typing import Dict, Mapping, Sequence
 
 from ..laws import BondLaw, ContactLaw
 
-__all__ = ["Effect"]
+__all__ = ["Effect", "clash"]
 
 _LAWS = {"contact": ContactLaw, "bond": BondLaw}
 
@@ -69,3 +69,19 @@ class Effect:
     def settings(self, value: float) -> Dict[str, float]:
         """The law fields to set for strength ``value`` (its param plus the fixed ones)."""
         return {self.param: float(value), **{k: float(v) for k, v in self.fixed.items()}}
+
+
+def clash(effects: Sequence[Effect]) -> str:
+    """Why ``effects`` cannot be on together, each at its probe strength, as the laws' own
+    checks say it (two laws of the unloading stiffness, for instance); "" when they can."""
+    fields: Dict[str, Dict[str, float]] = {law: {} for law in _LAWS}
+    for e in effects:
+        for p, v in e.settings(e.probe).items():
+            law, _, name = p.partition(".")
+            fields[law][name] = v
+    try:
+        for law, kw in fields.items():
+            _LAWS[law](**kw).to_core()
+    except ValueError as err:
+        return str(err)
+    return ""
