@@ -315,11 +315,13 @@ def close_loop(sim: Simulator, data: Dataset, base_bounds: Mapping[str, Sequence
         residual = describe_residual(fit_data, model.z_direct, model.n_params)
         remaining = []
         for name, e in library.items():
-            why = clash([library[c] for c in chosen] + [e]) if chosen and name not in chosen else ""
+            if name in chosen:
+                continue
+            why = clash([library[c] for c in chosen] + [e]) if chosen else ""
             if why:
                 say(f"{name} is not tried with {', '.join(chosen)}: {why}")
-            elif name not in chosen:
-                remaining.append(e)
+                continue
+            remaining.append(e)
         if not remaining or len(chosen) >= max_effects:
             steps.append(Step(model, residual, [], [], None, math.nan))
             break
