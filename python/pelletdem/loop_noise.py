@@ -132,20 +132,18 @@ class PackingNoise:
         return out
 
     def correlation(self, data: Dataset) -> np.ndarray:
-        """The packings' correlation between ``data``'s observations (-). Observations of conditions the
-        estimate never saw take their counterparts' correlation; between conditions nothing
-        is relied on (R = 0)."""
+        """The packings' correlation between ``data``'s observations (-). Observations of
+        conditions the estimate never saw take their counterparts' correlation; between
+        conditions nothing is relied on (R = 0)."""
         n = len(data)
         idx = self._mapping(data)
         conds = [o.condition for o in data.observations]
-        same = np.array([[conds[i] == conds[j] for j in range(n)] for i in range(n)], bool)
         R = np.eye(n)
         for i in range(n):
             for j in range(i + 1, n):
                 a, b = idx[i], idx[j]
-                if a is None or b is None or a == b or not same[i, j]:
-                    continue
-                if self.keys[a][0] == self.keys[b][0]:
+                if (a is not None and b is not None and a != b and conds[i] == conds[j]
+                        and self.keys[a][0] == self.keys[b][0]):
                     R[i, j] = R[j, i] = self.corr[a, b]
         return R
 
