@@ -19,10 +19,10 @@ import pelletdem as pd
 A = 3.9e-4  # lattice spacing, m: below 2 r_mean, so neighbours start overlapping (dense)
 
 
-def dense_lattice(n_side, threads, seed=3):
+def dense_lattice(n_side, threads, seed=3, contact=None):
     """A jittered cubic lattice of overlapping polydisperse spheres in a box of 6 planes, with
     random velocities and spins: dense, many contacts from the first step, with friction,
-    rolling resistance and adhesion all active (the paper's default law)."""
+    rolling resistance and adhesion all active (the paper's default law, or ``contact``)."""
     rng = np.random.default_rng(seed)
     g = np.arange(n_side) * A
     x = np.stack(np.meshgrid(g, g, g, indexing="ij"), -1).reshape(-1, 3)
@@ -31,7 +31,7 @@ def dense_lattice(n_side, threads, seed=3):
     radii = pd.truncated_normal_radii(n, mean=2e-4, sd=1e-5, r_min=1.8e-4, r_max=2.2e-4, seed=seed)
     L = (n_side - 1) * A
     w = pd.World(dt=2e-6, box=((-1e-3,) * 3, (L + 1e-3,) * 3), gravity=(0, 0, -9.81e4),
-                 skin=2e-5, threads=threads)
+                 skin=2e-5, threads=threads, contact=contact)
     w.add_particles(x, radii)
     for k in range(3):
         e = np.eye(3)[k]
@@ -133,6 +133,29 @@ def test_vector_kernels_give_the_scalar_kernels_bits(n_side, threads):
         assert np.array_equal(v, b.broken_bonds()[k]), k
     for k, v in a.bonds().items():  # the slots' state, written back to the records
         assert np.array_equal(v, b.bonds()[k]), k
+
+
+@pytest.mark.parametrize("effect", [{"hardening": 5.0}, {"hardening": 5.0, "hardening_exponent": 2.0},
+                                    {"unloading_growth": 7.0}, {"plastic_stiffness_ratio": 5.0}])
+def test_vector_kernels_give_the_scalar_kernels_bits_with_a_contact_effect(effect):
+    """The four-lane pair kernel runs a contact effect's hooks lane by lane: the same bits as
+    the scalar kernel, bonds included, and not the paper's law's bits (the effect acts)."""
+    law = pd.ContactLaw(**effect)
+    a = dense_lattice(8, threads=1, contact=law)
+    plain = dense_lattice(8, threads=1)
+    for w in (a, plain):
+        w.run(50)
+        w.create_bonds(pd.BondLaw(sigma_c=4e6, tau_c=4e6, gap_tolerance=1e-5).to_core())
+    b = a.clone()
+    b._core.vector_kernels = False
+    for w in (a, b, plain):
+        w.run(200)
+    assert a.coordination_number() > 4.0
+    assert np.array_equal(state(a), state(b))
+    assert np.array_equal(np.array(a.f), np.array(b.f))
+    for k, v in a.broken_bonds().items():
+        assert np.array_equal(v, b.broken_bonds()[k]), k
+    assert np.abs(state(a) - state(plain)).max() > 1e-9
 
 
 def test_sorting_particles_permutes_the_state_and_keeps_the_dynamics():

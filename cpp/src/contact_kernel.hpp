@@ -74,8 +74,9 @@ PELLETDEM_INLINE bool bonded_one(Index i, Index j, bool on, ContactHistory& h, B
 #ifdef PELLETDEM_LANES
 // Eq. 5 and 9-10 on four pairs q with histories hist, one per lane: contact_force's operations
 // in the same order (Eigen's expressions written out component by component), with its
-// branches as selects, for the law without its optional effects (HystereticLaw::plain_pairs;
-// k_2 is then constant and the stiffness scale 1). Out: the normal force fn, the tangential
+// branches as selects, for pairs of unit stiffness scale without normal damping
+// (HystereticLaw::plain_pairs); with an effect on, the normal force of eq. 5 is the scalar
+// law's, lane by lane. Out: the normal force fn, the tangential
 // force ft and the new history (delta0, hft).
 PELLETDEM_INLINE void contact_law_lanes(const PairLanes& q, const L4& hist, const HystereticLaw& law,
                                         const ContactLawParams& cp, double dt_inc, double adh, Lane& fn,
@@ -85,20 +86,35 @@ PELLETDEM_INLINE void contact_law_lanes(const PairLanes& q, const L4& hist, cons
   const L3& vt = q.vt;
   const Lane m_eff = q.mi * q.mj / (q.mi + q.mj);
 
-  // Eq. 5 (HystereticLaw::normal_force with scale 1 and constant k2).
   delta0 = hist.c0;
   hft = {hist.c1, hist.c2, hist.c3};
   const ContactLawParams& lp = law.params();
   const double s = 1.0;
-  const double k1 = s * lp.k1, k2 = s * lp.k2, kc = s * lp.kc * adh;
-  const Lane f_elastic = k2 * (delta - delta0);
-  const Lane kd = k1 * delta;
-  const Lane f_load = lane_select(kHuge < kd, Lane{} + kHuge, kd);  // std::min(k1 delta, kHuge)
-  const LaneMask loading = f_elastic >= f_load;
-  const LaneMask sticking = ~loading & (f_elastic <= -kc * delta);
-  fn = lane_select(loading, f_load, lane_select(sticking, -kc * delta, f_elastic));
-  delta0 = lane_select(loading, delta - f_load * (1.0 / k2),
-                       lane_select(sticking, delta * (1.0 + kc / k2), delta0));
+  if (law.effects_on()) {
+    // Eq. 5 with the effects' hooks: the law's own normal force, lane by lane (the hooks
+    // branch on the history and take powers and roots, which selects would all evaluate). A
+    // lane apart (in a bonded group) keeps its history; its force is discarded by the caller.
+    for (int l = 0; l < kLanes; ++l) {
+      if (!(delta[l] > 0.0)) {
+        fn[l] = 0.0;
+        continue;
+      }
+      double d0 = delta0[l];
+      fn[l] = law.normal_force(delta[l], d0, q.ri[l] * q.rj[l] / (q.ri[l] + q.rj[l]), adh);
+      delta0[l] = d0;
+    }
+  } else {
+    // Eq. 5 (HystereticLaw::normal_force with scale 1 and constant k2).
+    const double k1 = s * lp.k1, k2 = s * lp.k2, kc = s * lp.kc * adh;
+    const Lane f_elastic = k2 * (delta - delta0);
+    const Lane kd = k1 * delta;
+    const Lane f_load = lane_select(kHuge < kd, Lane{} + kHuge, kd);  // std::min(k1 delta, kHuge)
+    const LaneMask loading = f_elastic >= f_load;
+    const LaneMask sticking = ~loading & (f_elastic <= -kc * delta);
+    fn = lane_select(loading, f_load, lane_select(sticking, -kc * delta, f_elastic));
+    delta0 = lane_select(loading, delta - f_load * (1.0 / k2),
+                         lane_select(sticking, delta * (1.0 + kc / k2), delta0));
+  }
 
   // Eq. 9-10 (HystereticLaw::evaluate).
   const double kt = s * lp.kt_ratio * lp.k1;

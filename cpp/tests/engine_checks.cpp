@@ -142,7 +142,7 @@ void hardening_effect() {
   double delta0 = 0.0;
   const double f = law.normal_force(d, delta0, r_eff, 1.0);
   expect(close(f, p.k1 * d * (1.0 + 5.0 * 0.04), 1e-12), "hardening: k1 delta (1 + h (delta/r*)^2)");
-  expect(!p.plain_pairs(), "hardening sends pairs to the scalar kernel");
+  expect(p.plain_pairs(), "the four-lane kernel takes hardening's pairs (its hooks lane by lane)");
 }
 
 // Bad parameters are refused with a message naming the parameter.

@@ -67,7 +67,7 @@ class ParamRow:
     @property
     def lanes(self) -> bool:
         """False when the four-lane pair kernel lacks it (a value off its default runs the
-        scalar kernel)."""
+        scalar kernel); the contact effects' hooks run in the four lanes."""
     @property
     def doc(self) -> str: ...
 

@@ -1,6 +1,6 @@
 """hardening (cpp effects/hardening.hpp): the loading line k1 delta (1 + h (delta/r*)^n). Two
 spheres pressed together at a constant speed follow it while they load; off (h = 0) they
-follow the paper's k1 delta, and the effect sends pairs to the scalar kernel."""
+follow the paper's k1 delta; the four-lane pair kernel takes the effect's pairs."""
 from __future__ import annotations
 
 import numpy as np
@@ -37,7 +37,7 @@ def test_loading_follows_the_hardened_line(h, n):
     r_star = R / 2
     np.testing.assert_allclose(f, law.k1 * d * (1 + h * (d / r_star) ** n), rtol=1e-9)
     assert (d / r_star).max() > 0.095  # the effect is there at all: >= 5 % above k1 delta
-    assert not law.to_core().plain_pairs()
+    assert law.to_core().plain_pairs()
 
 
 def test_off_it_is_the_paper_line():

@@ -66,7 +66,7 @@ struct ContactLawParams {
             "two effects that shape the unloading stiffness are on at once: switch one off");
   }
   // True when pairs see only what the four-lane pair kernel implements: every row it lacks
-  // keeps its default (no size scaling, normal damping or effect on pairs).
+  // keeps its default (no size scaling or normal damping; the contact effects' hooks it calls).
   bool plain_pairs() const { return true PELLETDEM_CONTACT_ALL_ROWS(PELLETDEM_PARAM_LANES); }
   // True when every effect's row keeps its default: the law is the paper's.
   bool effects_off() const { return true PELLETDEM_CONTACT_EFFECT_ROWS(PELLETDEM_PARAM_AT_DEFAULT); }
@@ -109,9 +109,11 @@ class HystereticLaw {
 
   const ContactLawParams& params() const { return p_; }
   double damping_factor() const { return damping_factor_; }
-  // True when pairs see the paper's law alone: the pair loop's four-lane kernel covers
-  // exactly that case.
+  // True when the pair loop's four-lane kernel covers the pairs' law: unit stiffness scale and
+  // no normal damping; the effects' hooks it calls lane by lane (effects_on).
   bool plain_pairs() const { return p_.plain_pairs(); }
+  // True when some effect's row is off its default, so the hooks are called.
+  bool effects_on() const { return effects_; }
 
   // Factor on k1, k2, kc for one contact. Against a wall r_eff is the particle radius.
   PELLETDEM_INLINE double stiffness_scale(double r_eff, bool wall) const {

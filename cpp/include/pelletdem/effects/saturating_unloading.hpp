@@ -10,7 +10,7 @@
 #include "pelletdem/effect.hpp"
 
 #define PELLETDEM_ROWS_SaturatingUnloading(X)                                                       \
-  X(double, plastic_stiffness_ratio, 1.0, Range, 1.0, 1.0e3, "-", "plastic_stiffness_ratio", false, \
+  X(double, plastic_stiffness_ratio, 1.0, Range, 1.0, 1.0e3, "-", "plastic_stiffness_ratio", true,  \
     "k_p / k2: the unloading stiffness of a fully flattened contact; 1 is the paper's constant k2") \
   X(double, plastic_overlap, 0.2, Range, 1.0e-3, 10.0, "-", "plastic_overlap", true,                \
     "phi: the residual overlap delta0 / r* at which the unloading stiffness reaches k_p")

@@ -8,8 +8,8 @@
 
 #include "pelletdem/effect.hpp"
 
-#define PELLETDEM_ROWS_UnloadingGrowth(X)                                             \
-  X(double, unloading_growth, 0.0, Range, 0.0, 1.0e4, "-", "unloading_growth", false, \
+#define PELLETDEM_ROWS_UnloadingGrowth(X)                                            \
+  X(double, unloading_growth, 0.0, Range, 0.0, 1.0e4, "-", "unloading_growth", true, \
     "growth g of the unloading stiffness with plastic flattening, k2 (1 + g delta0/r*); 0 off")
 
 namespace pelletdem {
