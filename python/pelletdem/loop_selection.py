@@ -10,7 +10,10 @@ procedure is forward selection:
    the peak of their diametral test (no failure inside the window: the "peak" is the end of
    the test, and a bond effect shows nothing), the simulator's window is widened (x 1.5, up
    to dL/D = :data:`MAX_WINDOW`) and the baseline fitted again; what cannot be widened is
-   said in the verdict.
+   said in the verdict. A base parameter fitted at an end of its box is not fitted: the box is
+   widened there (by half its width, :mod:`pelletdem.loop_box`, up to :data:`MAX_WIDEN`
+   times) and the baseline fitted again with every point already simulated; a parameter
+   still pinned is said in the verdict.
 2. **Residual.** The fitted model's residual (simulated on the fit seeds) is described by
    :mod:`pelletdem.residuals` for the report: by part of the curve, by condition, trends.
 3. **Screen.** Every remaining candidate of the library is probed on top of the model and
@@ -46,6 +49,7 @@ from scipy import stats
 
 from .effects import EFFECTS, Effect, clash
 from .loop_data import Condition, Dataset
+from .loop_box import pinned, pinned_note, rebox, widened
 from .loop_emulator import Axis, Space
 from .loop_models import ModelFit, chi2_of, fit_model, nested_points
 from .loop_screen import Power, Screen, detection_power, screen
@@ -54,6 +58,9 @@ from .residuals import DEFAULT_ALPHA, ResidualSummary, describe
 
 __all__ = ["FIT_SEEDS", "CHECK_SEEDS", "MAX_WINDOW", "unfailed", "Trial", "Step", "LoopResult", "close_loop",
            "describe_residual"]
+
+#: Times the baseline's box is widened where its fit is pinned at an end (pelletdem.loop_box).
+MAX_WIDEN = 2
 
 #: Packings every model is designed and fitted on, and the fresh ones its fit is checked on.
 FIT_SEEDS = (0, 1, 2, 3)
@@ -305,6 +312,18 @@ def close_loop(sim: Simulator, data: Dataset, base_bounds: Mapping[str, Sequence
             f"the tests now run to dL/D = {new_end:.3g} and the model is fitted again")
         sim.widen(new_end)
         model = fit(Space(axes), (), dict(model.fit.params))
+    # a base parameter fitted at an end of its box is not fitted: widen the box there
+    base_names = [a.name for a in axes]
+    for _ in range(MAX_WIDEN):
+        ends = pinned(model, base_names)
+        if not ends:
+            break
+        space = widened(model.space, ends)
+        say("the baseline's " + "; ".join(f"{a.name} = {model.fit.params[a.name]:.4g} is at the {end} end of its box"
+                                          for a, end in ends)
+            + ": the box now runs " + ", ".join(f"{a.name} {a.lo:.4g} to {a.hi:.4g}" for a in space.axes)
+            + " and the model is fitted again")
+        model = fit(space, (), dict(model.fit.params), rebox(model, space))
     baseline = model
     errors = {model.name: _errors(model, fit_data, heldout)}
     steps: List[Step] = []
@@ -384,6 +403,10 @@ def close_loop(sim: Simulator, data: Dataset, base_bounds: Mapping[str, Sequence
     verdict = _verdict(chosen, steps, baseline)
     if window_note:
         verdict += f" ({window_note})"
+    box_note = pinned_note(pinned(model, base_names), model)
+    if box_note:
+        say(box_note)
+        verdict += f" ({box_note})"
     say(verdict)
     return LoopResult(fit_data, heldout, baseline, model, steps, chosen, verdict, errors, powers,
                       sim.n_simulations, time.perf_counter() - t0, lines)

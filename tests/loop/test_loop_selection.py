@@ -195,3 +195,36 @@ def test_a_candidate_that_cannot_join_the_added_effect_is_not_tried_with_it():
     assert res.chosen == ["springback"], "\n".join(res.log)
     assert any(line.startswith("saturating is not tried with springback: two effects that shape the unloading")
                for line in res.log), "\n".join(res.log)
+
+
+def test_a_base_parameter_pinned_at_its_box_is_let_go():
+    """The data's E_b (100 MPa) lies above the box (30-70 MPa): the baseline's fit is pinned at
+    the upper end, so the box is widened there and the fit lands on the truth, with nothing
+    added to a model without an effect."""
+    sim = FunctionSimulator(toy)
+    data = synthetic_dataset(sim, TRUTH, FIT + HELD, noise=0.02, compaction_points=4,
+                             seeds=[1000 + k for k in range(5)], seed=0)
+    res = close_loop(sim, data, {"E_b": (30e6, 70e6), "sigma_c": BOUNDS["sigma_c"]}, {"E_b": 50e6, "sigma_c": 10e6},
+                     held_out=lambda c: c in HELD, library=LIBRARY)
+    log = "\n".join(res.log)
+    assert "E_b = 7e+07 is at the upper end of its box" in log, log
+    axis = res.baseline.space.axes[0]
+    assert axis.name == "E_b" and axis.hi > TRUTH["E_b"]
+    assert res.baseline.fit.params["E_b"] == pytest.approx(TRUTH["E_b"], rel=0.1)
+    assert res.chosen == [] and "end of its box" not in res.verdict
+
+
+def test_a_parameter_the_box_cannot_reach_is_said_in_the_verdict():
+    """sigma_c (8 MPa, the curve's height) far above its box (3-4 MPa): two widenings do not
+    reach it (two log lines), and the verdict says where it is pinned (its log line and the
+    verdict's own)."""
+    sim = FunctionSimulator(toy)
+    data = synthetic_dataset(sim, TRUTH, FIT + HELD, noise=0.02, compaction_points=4,
+                             seeds=[1000 + k for k in range(5)], seed=0)
+    res = close_loop(sim, data, {"E_b": BOUNDS["E_b"], "sigma_c": (3e6, 4e6)}, {"E_b": 70e6, "sigma_c": 3.5e6},
+                     held_out=lambda c: c in HELD, library=LIBRARY, max_effects=0)
+    assert sum("sigma_c = " in line and "at the upper end of its box" in line for line in res.log) == 4, \
+        "\n".join(res.log)
+    assert "sigma_c = " in res.verdict and "is at the upper end of its box" in res.verdict
+    first = 4e6 * (4 / 3) ** 0.5
+    assert res.baseline.space.axes[1].hi == pytest.approx(first * (first / 3e6) ** 0.5)
