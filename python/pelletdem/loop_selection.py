@@ -48,8 +48,8 @@ import numpy as np
 from scipy import stats
 
 from .effects import EFFECTS, Effect, clash
-from .loop_data import Condition, Dataset
 from .loop_box import pinned, pinned_note, rebox, widened
+from .loop_data import Condition, Dataset
 from .loop_emulator import Axis, Space
 from .loop_models import ModelFit, chi2_of, fit_model, nested_points
 from .loop_screen import Power, Screen, detection_power, screen
