@@ -39,18 +39,21 @@ def pinned(mf: ModelFit, names: Sequence[str]) -> List[Tuple[Axis, str]]:
 
 def _wider(axis: Axis, end: str) -> Axis:
     """``axis`` with its ``end`` moved out by half its width (a factor sqrt(hi / lo) on a log
-    axis)."""
+    axis); a linear axis that starts at or above zero does not go below it."""
     if axis.log:
         f = math.sqrt(axis.hi / axis.lo)
-        return Axis(axis.name, axis.lo / f, axis.hi, True) if end == "lower" else Axis(axis.name, axis.lo,
-                                                                                      axis.hi * f, True)
-    w = 0.5 * (axis.hi - axis.lo)
-    return Axis(axis.name, axis.lo - w, axis.hi, False) if end == "lower" else Axis(axis.name, axis.lo,
-                                                                                   axis.hi + w, False)
+        lo, hi = (axis.lo / f, axis.hi) if end == "lower" else (axis.lo, axis.hi * f)
+    else:
+        w = 0.5 * (axis.hi - axis.lo)
+        lo, hi = (axis.lo - w, axis.hi) if end == "lower" else (axis.lo, axis.hi + w)
+        if axis.lo >= 0.0:
+            lo = max(lo, 0.0)
+    return Axis(axis.name, lo, hi, axis.log)
 
 
 def widened(space: Space, ends: Sequence[Tuple[Axis, str]]) -> Space:
-    """``space`` with each (axis, end) of ``ends`` moved out (see the module docstring)."""
+    """``space`` with each (axis, end) of ``ends`` moved out (see the module docstring); the
+    same box when none can move (a linear axis pinned at zero)."""
     move = {a.name: end for a, end in ends}
     return Space(tuple(_wider(a, move[a.name]) if a.name in move else a for a in space.axes), space.fixed)
 

@@ -319,11 +319,17 @@ def close_loop(sim: Simulator, data: Dataset, base_bounds: Mapping[str, Sequence
         if not ends:
             break
         space = widened(model.space, ends)
+        if space == model.space:
+            break
         say("the baseline's " + "; ".join(f"{a.name} = {model.fit.params[a.name]:.4g} is at the {end} end of its box"
                                           for a, end in ends)
             + ": the box now runs " + ", ".join(f"{a.name} {a.lo:.4g} to {a.hi:.4g}" for a in space.axes)
             + " and the model is fitted again")
-        model = fit(space, (), dict(model.fit.params), rebox(model, space))
+        try:
+            model = fit(space, (), dict(model.fit.params), rebox(model, space))
+        except ValueError as err:  # the simulator refuses the wider box's parameters
+            say(f"the box cannot be widened there: {err}")
+            break
     baseline = model
     errors = {model.name: _errors(model, fit_data, heldout)}
     steps: List[Step] = []
