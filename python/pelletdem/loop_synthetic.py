@@ -30,6 +30,26 @@ def _curve_at(xy, x: float) -> float:
     return float(np.interp(x, xs[order], ys[order]))
 
 
+def _unfailed(ensembles) -> int:
+    """Replicates that did not fail within the test window, over every condition."""
+    return sum(m.scalars.get("peaked", 1.0) < 1.0 for e in ensembles.values() if e.ok for m in e.members)
+
+
+def _tested_to_failure(sim: Simulator, truth: Mapping[str, float], conditions: Sequence[Condition],
+                       seeds: Sequence[int]):
+    """The replicates' ensembles, each test run until its pellet broke, as a laboratory runs
+    it: where a replicate has not failed by the end of the window and the simulator can
+    widen it, the window is widened (x 1.5, up to dL/D = MAX_WINDOW) and the truth simulated
+    again; the simulator keeps the wider window."""
+    from .loop_selection import MAX_WINDOW
+
+    ensembles = sim.predict(dict(truth), list(conditions), seeds)
+    while _unfailed(ensembles) and getattr(sim, "widen", None) is not None and sim.max_dLD < MAX_WINDOW:
+        sim.widen(min(MAX_WINDOW, 1.5 * sim.max_dLD))
+        ensembles = sim.predict(dict(truth), list(conditions), seeds)
+    return ensembles
+
+
 def synthetic_dataset(sim: Simulator, truth: Mapping[str, float], conditions: Sequence[Condition], *,
                       seeds: Sequence[int] = DATA_SEEDS, noise: float = 0.02,
                       quantities: Sequence[str] = ("sigma_1", "sigma_f", "dLf_D", "bulk_density"),
@@ -37,7 +57,9 @@ def synthetic_dataset(sim: Simulator, truth: Mapping[str, float], conditions: Se
     """Data of ``conditions`` made by ``sim`` under ``truth`` (SI; it may switch on any
     effect, in the library or not): one replicate per packing of ``seeds`` (at least 2), each
     number of each replicate times (1 + ``noise`` N(0, 1)) (``seed`` seeds that noise), then
-    the replicates' mean, SD and count per number. ``quantities``: of sigma_1 (curve points),
+    the replicates' mean, SD and count per number. A replicate that has not failed by the end
+    of the diametral window is tested further where the simulator can widen its window (to
+    dL/D 0.5 at most), as a laboratory tests until the pellet breaks. ``quantities``: of sigma_1 (curve points),
     sigma_f, dLf_D, bulk_density; ``compaction_points``: sigma_z at that many dh/h0 from 0.3 of
     the compaction curve's range to its end (0: none)."""
     if not (isinstance(noise, (int, float)) and 0 <= noise < 1):
@@ -49,7 +71,7 @@ def synthetic_dataset(sim: Simulator, truth: Mapping[str, float], conditions: Se
     if bad:
         raise ValueError(f"quantities {sorted(bad)}: allowed sigma_1, sigma_f, dLf_D, bulk_density")
     rng = np.random.default_rng(seed)
-    ensembles = sim.predict(dict(truth), list(conditions), seeds)
+    ensembles = _tested_to_failure(sim, truth, conditions, seeds)
     obs = []
 
     def measured(values, x=float("nan"), quantity="sigma_f", part="scalar", cond=None):

@@ -37,3 +37,30 @@ def test_bad_arguments_are_refused_before_any_simulation():
         synthetic_dataset(sim, TRUTH, FIT, seeds=[1])
     with pytest.raises(ValueError, match="quantities"):
         synthetic_dataset(sim, TRUTH, FIT, quantities=("porosity",))
+
+
+class _Window(FunctionSimulator):
+    """The toy pellet behind a test window: a replicate fails inside it only from dL/D
+    ``needs`` on (a ductile pellet), as the engine's tests end at max_dLD."""
+
+    def __init__(self, needs):
+        self.max_dLD, self.needs = 0.2, needs
+        super().__init__(self._run)
+
+    def widen(self, max_dLD):
+        self.max_dLD = max_dLD
+        self._memo.clear()  # a longer test is another simulation, as in the engine's cache key
+
+    def _run(self, p, c, s):
+        pred = toy(p, c, s)
+        pred.scalars["peaked"] = 1.0 if self.max_dLD >= self.needs else 0.0
+        return pred
+
+
+def test_a_replicate_that_has_not_broken_is_tested_further():
+    sim = _Window(needs=0.4)
+    d = synthetic_dataset(sim, TRUTH, FIT, noise=0.02)
+    assert sim.max_dLD == pytest.approx(0.2 * 1.5 * 1.5)  # widened twice, as a laboratory tests on
+    assert any(o.quantity == "sigma_f" for o in d.observations)
+    with pytest.raises(ValueError, match="do not fail within the diametral test window"):
+        synthetic_dataset(_Window(needs=0.6), TRUTH, FIT, noise=0.02)  # not even at dL/D 0.5
