@@ -93,9 +93,10 @@ PELLETDEM_INLINE void contact_law_lanes(const PairLanes& q, const L4& hist, cons
   if (law.effects_on()) {
     // Eq. 5 with the effects' hooks: the law's own normal force, lane by lane (the hooks
     // branch on the history and take powers and roots, which selects would all evaluate). A
-    // lane apart (in a bonded group) keeps its history; its force is discarded by the caller.
+    // lane apart (in a bonded group: the pair loop's touch test, to the bit) keeps its
+    // history; its force is discarded by the caller.
     for (int l = 0; l < kLanes; ++l) {
-      if (!(delta[l] > 0.0)) {
+      if (!q.touch[l]) {
         fn[l] = 0.0;
         continue;
       }
