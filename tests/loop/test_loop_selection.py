@@ -137,8 +137,12 @@ def test_a_fitted_model_that_does_not_fail_gets_a_wider_window():
 
 
 def test_synthetic_data_refuse_replicates_that_do_not_break():
+    # a simulator that cannot test further (tests/loop/test_loop_synthetic.py: one that can is
+    # widened until its replicates break)
+    sim = WindowedToy(0.03)
+    sim.widen = None
     with pytest.raises(ValueError, match="do not fail within"):
-        synthetic_dataset(WindowedToy(0.03), TRUTH, FIT, noise=0.02)
+        synthetic_dataset(sim, TRUTH, FIT, noise=0.02)
 
 
 def test_a_simulator_that_cannot_widen_says_so_in_the_verdict():
