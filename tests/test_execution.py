@@ -91,3 +91,58 @@ def test_workers_end_when_their_driver_is_killed(tmp_path):
         assert not _alive(worker), "the worker outlived its driver"
     finally:
         p.kill()
+
+
+class _Spec:
+    """A run with only what the Evaluator reads: its key and its relaxed pellet's key."""
+
+    def __init__(self, key: str, relax_key: str):
+        self.key, self.relax_key = key, relax_key
+
+
+def _timed_runner(log, lock):
+    import time
+
+    def run(spec):
+        t0 = time.perf_counter()
+        time.sleep(0.02)
+        with lock:
+            log.append((spec.relax_key, t0, time.perf_counter()))
+        return {"key": spec.key, "ok": True, "relaxed_reused": True, "wall_time_s": 0.0}
+    return run
+
+
+def test_runs_of_one_relaxed_pellet_wait_for_the_first_where_workers_share_pellets():
+    import concurrent.futures as cf
+    import threading
+
+    from pelletdem.execution import Evaluator
+    from pelletdem.run_cache import RunCache
+
+    specs = [_Spec(f"k{g}{i}", f"r{g}") for g in range(3) for i in range(4)]
+    log, lock = [], threading.Lock()
+    with cf.ThreadPoolExecutor(2) as ex:
+        recs = Evaluator(RunCache(), ex, _timed_runner(log, lock), relaxed_shared=True).run_all(specs[::-1])
+    assert [r["key"] for r in recs] == [s.key for s in specs[::-1]]  # the order given
+    for g in range(3):
+        runs = sorted((t0, t1) for r, t0, t1 in log if r == f"r{g}")
+        assert len(runs) == 4
+        assert all(t0 >= runs[0][1] for t0, _ in runs[1:])  # none began before the first ended
+    # and the pellets' first runs went out together: the two workers were both used
+    firsts = sorted(min(t0 for r, t0, _ in log if r == f"r{g}") for g in range(3))
+    assert firsts[1] < min(t1 for _, _, t1 in log)
+
+
+def test_runs_of_one_relaxed_pellet_go_out_together_where_workers_do_not_share_pellets():
+    import concurrent.futures as cf
+    import threading
+
+    from pelletdem.execution import Evaluator
+    from pelletdem.run_cache import RunCache
+
+    specs = [_Spec(f"k{i}", "r0") for i in range(4)]
+    log, lock = [], threading.Lock()
+    with cf.ThreadPoolExecutor(2) as ex:
+        Evaluator(RunCache(), ex, _timed_runner(log, lock)).run_all(specs)
+    starts = sorted(t0 for _, t0, _ in log)
+    assert starts[1] < min(t1 for _, _, t1 in log)  # two runs of the one pellet at once

@@ -273,7 +273,9 @@ class Evaluator:
 
     ``cache``: the :class:`pelletdem.run_cache.RunCache` records are read from and written
     to; ``executor``: where runs go (:func:`open_executor`); ``runner``: the function run per
-    :class:`pelletdem.runs.RunSpec` (:func:`with_relaxed_dir`). Counts are in :meth:`stats`.
+    :class:`pelletdem.runs.RunSpec` (:func:`with_relaxed_dir`); ``relaxed_shared``: the runner
+    keeps its relaxed pellets where every worker finds them (a ``relaxed_dir``), so the runs of
+    one pellet wait for its first (:meth:`run_all`). Counts are in :meth:`stats`.
 
     A run whose future raises (its worker process died: BrokenProcessPool; or the runner
     raised) is retried once, alone in a fresh worker when the executor is a process pool; if
@@ -283,8 +285,9 @@ class Evaluator:
 
     RETRIES = 1
 
-    def __init__(self, cache: RunCache, executor, runner: Callable[[RunSpec], dict]):
+    def __init__(self, cache: RunCache, executor, runner: Callable[[RunSpec], dict], relaxed_shared: bool = False):
         self.cache, self.executor, self.runner = cache, executor, runner
+        self.relaxed_shared = bool(relaxed_shared)
         self._lock = threading.Lock()
         self._inflight: Dict[str, cf.Future] = {}
         self.n_run = 0          # runs executed now
@@ -373,11 +376,51 @@ class Evaluator:
                 "attempts": len(errors), "worker_failure": True}
 
     def run_all(self, specs: Sequence[RunSpec]) -> List[dict]:
-        """Records of all specs (submitted grouped by relax key), in the order given."""
+        """Records of all specs (submitted grouped by relax key), in the order given.
+
+        With ``relaxed_shared`` (the workers reach one ``relaxed_dir``) only the first run of
+        each relaxed pellet is submitted at once, and the rest of its group once that run is
+        done: two idle workers handed two runs of one pellet would each compact it, and a
+        design whose points share relaxed pellets would save nothing."""
         order = sorted(range(len(specs)), key=lambda i: (specs[i].relax_key, i))
-        futs = {i: self.submit(specs[i]) for i in order}
+        if not self.relaxed_shared:
+            futs = {i: self.submit(specs[i]) for i in order}
+            return self._gather(futs, len(specs))
+        groups: Dict[str, List[int]] = {}
+        for i in order:
+            groups.setdefault(specs[i].relax_key, []).append(i)
+        futs = {i: cf.Future() for i in order}
+        stop = threading.Event()
+
+        def relay(i: int, then: Sequence[int] = ()) -> None:
+            if stop.is_set():
+                futs[i].cancel()
+                return
+            inner = self.submit(specs[i])
+
+            def done(f: cf.Future) -> None:
+                for j in then:  # the rest of the group, now that its pellet is relaxed
+                    relay(j)
+                if f.cancelled():
+                    futs[i].cancel()
+                elif f.exception() is not None:
+                    _set(futs[i], error=f.exception())
+                else:
+                    _set(futs[i], result=f.result())
+
+            inner.add_done_callback(done)
+
+        for members in groups.values():
+            relay(members[0], members[1:])
         try:
-            return [futs[i].result() for i in range(len(specs))]
+            return self._gather(futs, len(specs))
+        finally:
+            stop.set()
+
+    @staticmethod
+    def _gather(futs: Dict[int, cf.Future], n: int) -> List[dict]:
+        try:
+            return [futs[i].result() for i in range(n)]
         except BaseException:
             for f in futs.values():
                 f.cancel()

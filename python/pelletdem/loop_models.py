@@ -22,7 +22,8 @@ from .loop_fit import EmulatedFit, fit_emulated, profile, welch_z
 from .loop_noise import PackingNoise
 from .loop_simulators import Ensemble, Simulator
 
-__all__ = ["ModelFit", "REFINE_ROUNDS", "design_size", "simulate_design", "local_design", "fit_model",
+__all__ = ["ModelFit", "REFINE_ROUNDS", "design_size", "relaxing_axes", "share_relaxations", "simulate_design",
+           "local_design", "fit_model",
            "nested_points", "ensemble_z", "emulator_correlation", "chi2_of"]
 
 
@@ -37,6 +38,36 @@ NOISE_RADIUS = 0.1
 def design_size(dim: int) -> int:
     """Design points for a box of ``dim`` parameters: 6 per dimension, at least 12."""
     return max(12, 6 * dim)
+
+
+def relaxing_axes(sim: Simulator, space: Space, conditions: Sequence[Condition]) -> Tuple[int, ...]:
+    """The axes of ``space`` along which the simulator's relaxed pellets change (a compaction
+    effect's strength, k1), from the simulator's own :meth:`Simulator.same_relaxation` at the
+    two ends of each axis (the others at the box's centre)."""
+    mid = space.params(np.full(space.dim, 0.5))
+    out = []
+    for k, a in enumerate(space.axes):
+        try:
+            same = sim.same_relaxation(dict(mid, **{a.name: a.lo}), dict(mid, **{a.name: a.hi}), conditions)
+        except ValueError:  # a parameter the simulator checks only when it runs: as if it relaxed
+            same = False
+        if not same:
+            out.append(k)
+    return tuple(out)
+
+
+def share_relaxations(U: np.ndarray, axes: Sequence[int]) -> np.ndarray:
+    """``U`` with its second half taking the first half's coordinates on ``axes`` (row i + h
+    those of row i, h = ceil(n / 2)): along a compaction parameter every new value compacts
+    new pellets (most of a run's cost), and this way each relaxed pellet serves two design
+    points, which differ on the other axes. Unchanged when every axis (or none) relaxes."""
+    U = np.array(U, dtype=float, copy=True)
+    if not axes or len(axes) >= U.shape[1] or len(U) < 2:
+        return U
+    h = (len(U) + 1) // 2
+    idx = list(axes)
+    U[h:, idx] = U[:len(U) - h, idx]
+    return U
 
 
 @dataclass
@@ -99,13 +130,14 @@ def chi2_of(z: np.ndarray) -> float:
 
 
 def simulate_design(sim: Simulator, space: Space, data: Dataset, seeds: Sequence[int],
-                    n: Optional[int] = None,
-                    U: Optional[np.ndarray] = None) -> Tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+                    n: Optional[int] = None, U: Optional[np.ndarray] = None,
+                    relaxing: Sequence[int] = ()) -> Tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(U, Y, SE, V): the design positions of ``space`` (default its Sobol design of ``n``
-    points), the ensemble means and standard errors of every observation of ``data`` there,
-    simulated on ``seeds``, and each packing's own prediction, V[point, packing, observation]."""
+    points, its points paired on the ``relaxing`` axes, :func:`share_relaxations`), the
+    ensemble means and standard errors of every observation of ``data`` there, simulated on
+    ``seeds``, and each packing's own prediction, V[point, packing, observation]."""
     if U is None:
-        U = design(space.dim, n or design_size(space.dim))
+        U = share_relaxations(design(space.dim, n or design_size(space.dim)), relaxing)
     conds = data.conditions
     preds = sim.predict_many([space.params(u) for u in U], conds, tuple(seeds))
     Y = np.empty((len(U), len(data)))
@@ -118,11 +150,13 @@ def simulate_design(sim: Simulator, space: Space, data: Dataset, seeds: Sequence
     return U, Y, SE, V
 
 
-def local_design(space: Space, u: np.ndarray, half_width: float, n: int, seed: int) -> np.ndarray:
+def local_design(space: Space, u: np.ndarray, half_width: float, n: int, seed: int,
+                 relaxing: Sequence[int] = ()) -> np.ndarray:
     """``u`` and ``n`` Sobol points of the box of ``half_width`` (unit coordinates) around it,
-    clipped to the model's box: where a refinement of the emulator simulates."""
+    clipped to the model's box, paired on the ``relaxing`` axes (:func:`share_relaxations`):
+    where a refinement of the emulator simulates."""
     pts = np.clip(u + (design(space.dim, max(n, 2), seed) - 0.5) * 2.0 * half_width, 0.0, 1.0)
-    return np.vstack([u[None, :], pts[:n]])
+    return np.vstack([u[None, :], share_relaxations(pts[:n], relaxing)])
 
 
 def _emulate(space: Space, U, Y, SE, name: str, warm: Optional[Emulator] = None) -> Emulator:
@@ -153,7 +187,8 @@ def fit_model(sim: Simulator, space: Space, effects: Sequence[str], fit_data: Da
     n_new = design_size(space.dim) if n_design is None else n_design
     log(f"{name}: simulating {n_new} design points on {len(fit_seeds)} packings x "
         f"{len(fit_data.conditions)} conditions")
-    U, Y, SE, V = simulate_design(sim, space, fit_data, fit_seeds, n_design)
+    relaxing = relaxing_axes(sim, space, fit_data.conditions)
+    U, Y, SE, V = simulate_design(sim, space, fit_data, fit_seeds, n_design, relaxing=relaxing)
     UV, VV = [U], [V]  # the points simulated here, with each packing's prediction
     k = len(fit_seeds)
     estimate = noise is None
@@ -164,7 +199,7 @@ def fit_model(sim: Simulator, space: Space, effects: Sequence[str], fit_data: Da
     fit = fit_emulated(emu, fit_data, space.unit(start) if start else None,
                        corr=emulator_correlation(noise, emu, fit_data, k))
     for r in range(refine):
-        Ul = local_design(space, fit.u, 0.15 / 2 ** r, 2 * space.dim + 2, seed=r + 1)
+        Ul = local_design(space, fit.u, 0.15 / 2 ** r, 2 * space.dim + 2, seed=r + 1, relaxing=relaxing)
         _, Yl, SEl, Vl = simulate_design(sim, space, fit_data, fit_seeds, U=Ul)
         UV.append(Ul)
         VV.append(Vl)

@@ -127,6 +127,13 @@ class Simulator:
         """Simulations run so far (cache hits not counted)."""
         return 0
 
+    def same_relaxation(self, a: Mapping[str, float], b: Mapping[str, float],
+                        conditions: Sequence[Condition]) -> bool:
+        """Whether the parameter sets ``a`` and ``b`` (SI) run from the same relaxed pellets
+        (fill to relaxation) at every condition and packing, so that a design may let two of
+        its points share one. False where the simulator cannot tell."""
+        return False
+
     def close(self) -> None:
         """Release workers (no-op by default)."""
 
@@ -140,11 +147,15 @@ class Simulator:
 class FunctionSimulator(Simulator):
     """A simulator from a Python function ``fn(params, condition, seed) -> Prediction`` (a
     function of (params, condition) is taken too: it then predicts the same on every packing).
-    Repeated calls are memoised."""
+    Repeated calls are memoised. ``packing_params``: the parameters that change the packing
+    itself, as a compaction parameter does in the DEM (None: not known); two parameter sets
+    that agree on them share their packings (:meth:`same_relaxation`)."""
 
-    def __init__(self, fn: Callable[..., Prediction], default_seeds: Sequence[int] = (0,)):
+    def __init__(self, fn: Callable[..., Prediction], default_seeds: Sequence[int] = (0,),
+                 packing_params: Optional[Sequence[str]] = None):
         if not callable(fn):
             raise ValueError("fn must be callable")
+        self.packing_params = None if packing_params is None else tuple(packing_params)
         try:
             n_args = len(inspect.signature(fn).parameters)
         except (TypeError, ValueError):
@@ -153,6 +164,14 @@ class FunctionSimulator(Simulator):
         self.default_seeds = tuple(int(s) for s in default_seeds)
         self._n = 0
         self._memo: Dict[tuple, Prediction] = {}
+
+    def same_relaxation(self, a, b, conditions) -> bool:
+        """Whether ``a`` and ``b`` agree on every one of :attr:`packing_params` (False where
+        those are not known)."""
+        if self.packing_params is None:
+            return False
+        return all(float(a.get(p, math.nan)) == float(b.get(p, math.nan)) or (p not in a and p not in b)
+                   for p in self.packing_params)
 
     def predict_many(self, params_list, conditions, seeds=None):
         """Calls ``fn`` once per new (params, condition, seed)."""
@@ -208,7 +227,7 @@ class EngineSimulator(Simulator):
         self._stack = contextlib.ExitStack()
         ex = self._stack.enter_context(open_executor(executor, max_workers))
         runner = with_relaxed_dir(run_point, relaxed_dir)
-        self.evaluator = Evaluator(RunCache(cache_dir), ex, runner)
+        self.evaluator = Evaluator(RunCache(cache_dir), ex, runner, relaxed_shared=relaxed_dir is not None)
 
     def close(self) -> None:
         """Shut the executor down."""
@@ -228,6 +247,12 @@ class EngineSimulator(Simulator):
     def n_simulations(self) -> int:
         """Simulations run now (the cache's hits are not counted)."""
         return self.evaluator.n_run
+
+    def same_relaxation(self, a, b, conditions) -> bool:
+        """Whether ``a`` and ``b`` (SI) give the same relaxed pellets: the same relax key of
+        their runs (:attr:`pelletdem.runs.RunSpec.relax_key`) at every condition."""
+        seed = self.default_seeds[0]
+        return all(self._spec(a, c, seed).relax_key == self._spec(b, c, seed).relax_key for c in conditions)
 
     def _spec(self, params: Mapping[str, float], cond: Condition, seed: int):
         base, contact, bond = {}, dict(self.setup.contact or {}), {}

@@ -280,7 +280,7 @@ def scan(param_grid: Mapping[str, Sequence[float]], targets=None, *, preset="tin
                 specs.append(setup.spec({k: v for k, v in p.items() if k != "seed"}, sz, s, dia))
                 index.append((pi, ti, s))
     with open_executor(executor, max_workers) as ex:
-        ev = Evaluator(cache, ex, with_relaxed_dir(runner, relaxed_dir))
+        ev = Evaluator(cache, ex, with_relaxed_dir(runner, relaxed_dir), relaxed_shared=relaxed_dir is not None)
         records = ev.run_all(specs)
     crit = _Problem([], tg, setup, criterion).criterion if tg[0] is not None else "z"
     rows = []
@@ -556,7 +556,8 @@ def fit(params: Mapping[str, Sequence[float]], targets, *, start: Optional[Mappi
         pts, msg, conv = go(ev)
     else:
         with open_executor(executor, max_workers) as ex:
-            ev = Evaluator(RunCache(cache_dir), ex, with_relaxed_dir(runner, relaxed_dir))
+            ev = Evaluator(RunCache(cache_dir), ex, with_relaxed_dir(runner, relaxed_dir),
+                           relaxed_shared=relaxed_dir is not None)
             before = ev.stats()
             pts, msg, conv = go(ev)
     after = ev.stats()

@@ -153,7 +153,8 @@ def calibrate_variants(variants=None, preset="tiny", *,
     vlog = (lambda *a: print(*a, flush=True)) if verbose else (lambda *a: None)
 
     with open_executor(executor, max_workers) as ex:
-        ev = Evaluator(RunCache(cache_dir), ex, with_relaxed_dir(runner, relaxed_dir))
+        ev = Evaluator(RunCache(cache_dir), ex, with_relaxed_dir(runner, relaxed_dir),
+                       relaxed_shared=relaxed_dir is not None)
         contact = dict(contact or {})
         comp_fit = None
         if compaction is not None:

@@ -3,7 +3,7 @@ session, as they take seconds each."""
 from __future__ import annotations
 
 import pytest
-from toy_pellet import BOUNDS, FIT, HELD, LIBRARY, START, TRUTH, toy
+from toy_pellet import BOUNDS, FIT, HELD, LIBRARY, PACKING, START, TRUTH, toy
 
 from pelletdem.loop import FunctionSimulator, close_loop, synthetic_dataset
 
@@ -15,7 +15,7 @@ def toy_loop(extra, draw=0, **kw):
     + k (k < 5), 2 % noise, 90 MPa held out; memoised by (extra, draw, kw)."""
     key = (tuple(sorted(extra.items())), draw, tuple(sorted(kw.items())))
     if key not in _RUNS:
-        sim = FunctionSimulator(toy)
+        sim = FunctionSimulator(toy, packing_params=PACKING)
         data = synthetic_dataset(sim, {**TRUTH, **extra}, FIT + HELD, noise=0.02, compaction_points=4,
                                  seeds=[1000 + 10 * draw + k for k in range(5)], seed=draw)
         _RUNS[key] = close_loop(sim, data, BOUNDS, START, held_out=lambda c: c in HELD,

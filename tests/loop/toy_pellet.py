@@ -38,6 +38,9 @@ LIBRARY = {e.name: e for e in (
            "more spring-back", "density too high"),
 )}
 
+#: The parameters that re-draw the packing (:func:`_packing`).
+PACKING = ("contact.unloading_growth",)
+
 #: The packings' scatter: strength, deformation at failure, each curve point, density.
 SCATTER = {"S": 0.05, "x_f": 0.06, "point": 0.02, "density": 0.003}
 

@@ -1,0 +1,56 @@
+"""Design points that share relaxed pellets: along a compaction parameter every new value
+compacts new pellets, so the designs pair their points on such axes."""
+from __future__ import annotations
+
+import numpy as np
+from toy_pellet import FIT, PACKING, toy
+
+from pelletdem.loop import FunctionSimulator
+from pelletdem.loop_emulator import Axis, Space, design
+from pelletdem.loop_models import local_design, relaxing_axes, share_relaxations
+
+
+def test_the_second_half_of_a_design_takes_the_first_half_s_relaxing_coordinates():
+    U = design(3, 8)
+    P = share_relaxations(U, (2,))
+    assert np.array_equal(P[4:, 2], U[:4, 2]) and np.array_equal(P[:4], U[:4])
+    assert np.array_equal(P[:, :2], U[:, :2])  # the other axes keep the whole Sobol design
+    assert len({round(v, 12) for v in P[:, 2]}) == 4  # four relaxations serve eight points
+    assert len({tuple(np.round(r, 12)) for r in P}) == 8  # and no two points coincide
+    # an odd number: the middle point keeps its own
+    P5 = share_relaxations(design(2, 5), (1,))
+    assert len({round(v, 12) for v in P5[:, 1]}) == 3
+
+
+def test_nothing_is_paired_where_every_axis_or_none_relaxes():
+    U = design(2, 8)
+    assert np.array_equal(share_relaxations(U, ()), U)
+    assert np.array_equal(share_relaxations(U, (0, 1)), U)  # pairs would be the same point
+
+
+def test_a_local_design_keeps_its_centre_and_pairs_the_rest():
+    space = Space((Axis("E_b", 1e7, 1e9), Axis("contact.unloading_growth", 0.1, 50.0)))
+    u = np.array([0.4, 0.6])
+    L = local_design(space, u, 0.15, 6, seed=1, relaxing=(1,))
+    assert np.array_equal(L[0], u)
+    assert np.array_equal(L[4:, 1], L[1:4, 1])
+    assert np.all(np.abs(L - u) <= 0.15 + 1e-12)
+
+
+def test_the_relaxing_axes_are_those_the_simulator_says_change_the_packing():
+    space = Space((Axis("E_b", 1e7, 1e9), Axis("sigma_c", 1e6, 1e8), Axis("contact.unloading_growth", 0.1, 50.0)))
+    assert relaxing_axes(FunctionSimulator(toy, packing_params=PACKING), space, FIT) == (2,)
+    # a simulator that cannot tell: every axis, and the design is left as it was
+    assert relaxing_axes(FunctionSimulator(toy), space, FIT) == (0, 1, 2)
+
+
+def test_the_engine_says_which_parameters_compact_new_pellets():
+    from pelletdem.loop import Condition, EngineSimulator
+
+    base = {"E_b": 6e7, "sigma_c": 9e6}
+    conds = [Condition(60e6), Condition(120e6)]
+    with EngineSimulator("tiny") as sim:
+        assert sim.same_relaxation(base, dict(base, E_b=1e8), conds)  # bonds form after relaxation
+        assert sim.same_relaxation(base, dict(base, **{"bond.softening": 2.0}), conds)
+        assert not sim.same_relaxation(base, dict(base, **{"contact.hardening": 3.0}), conds)
+        assert not sim.same_relaxation(base, dict(base, k1=3e4), conds)
