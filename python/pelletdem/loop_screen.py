@@ -15,7 +15,11 @@ lambda(s) ~ |d_perp|^2 (x(s) / x(probe))^2, x the effect's size (its strength's 
 off; 1 / strength for effects that grow as the strength falls, such as a Weibull modulus). The
 strength at which the acceptance threshold is passed with probability 0.8 is what these data
 can reveal; the replicates (or the model's packings) that would reveal the probe strength
-follow from how lambda grows as the data's (or the model's) standard errors shrink.
+follow from how lambda grows as the data's (or the model's) standard errors shrink. Where
+the fitted parameters can do most of an effect's signature (:data:`ABSORBED_NOTE`), the
+statement says which parameter: data that carry the effect may be fitted by moving that
+parameter instead (a ductile bond read as a stronger one), and the linear bound is then
+optimistic.
 """
 from __future__ import annotations
 
@@ -32,7 +36,11 @@ from .loop_data import Dataset
 from .loop_models import ModelFit, unit_jacobian
 from .loop_simulators import Simulator
 
-__all__ = ["Screen", "Power", "screen", "detection_power", "lambda_for_power"]
+__all__ = ["Screen", "Power", "screen", "detection_power", "lambda_for_power", "ABSORBED_NOTE"]
+
+#: A power statement says that the fitted parameters can mimic the effect where they can do
+#: at least this fraction of its signature (first order, weighted).
+ABSORBED_NOTE = 0.75
 
 
 @dataclass
@@ -40,7 +48,9 @@ class Screen:
     """One candidate's screening: ``gain`` (first-order chi2 drop, -), ``strength`` (its
     first-order best strength, SI, clipped to the effect's bounds), ``lam_probe`` (|d_perp|^2:
     the chi2 drop the probe strength would give, -), ``d_perp`` (weighted signature orthogonal
-    to the fitted parameters), ``skipped`` (why it was not screened, '' when it was)."""
+    to the fitted parameters), ``absorbed`` (the fraction of the weighted signature's square
+    that the fitted parameters can do as well, to first order, -) and ``absorber`` (the fitted
+    parameter most aligned with it), ``skipped`` (why it was not screened, '' when it was)."""
 
     effect: Effect
     gain: float = 0.0
@@ -48,6 +58,8 @@ class Screen:
     lam_probe: float = 0.0
     d_perp: Optional[np.ndarray] = None
     skipped: str = ""
+    absorbed: float = 0.0
+    absorber: str = ""
 
 
 def _size(e: Effect, s: float) -> float:
@@ -99,8 +111,10 @@ def screen(sim: Simulator, mf: ModelFit, candidates: Sequence[Effect], data: Dat
         if not np.all(np.isfinite(mu_p)):
             out.append(Screen(e, skipped="its probe's simulation failed"))
             continue
-        d_perp = _perp(J, (mu_p - mu_b) / sigma)
+        d = (mu_p - mu_b) / sigma
+        d_perp = _perp(J, d)
         dd = float(d_perp @ d_perp)
+        absorbed, absorber = _absorbed(J, d, d_perp, mf.space.names)
         if dd <= 0:
             out.append(Screen(e, skipped="its probe changes nothing the data measure"))
             continue
@@ -111,8 +125,19 @@ def screen(sim: Simulator, mf: ModelFit, candidates: Sequence[Effect], data: Dat
         x = _size(e, e.probe) * abs(a) if allowed else 0.0
         s = _strength(e, x, 1.0 if a >= 0 else -1.0) if allowed else e.off
         s = float(np.clip(s, e.lo, e.hi)) if math.isfinite(s) else e.hi
-        out.append(Screen(e, gain, s, dd, d_perp))
+        out.append(Screen(e, gain, s, dd, d_perp, absorbed=absorbed, absorber=absorber))
     return sorted(out, key=lambda s: (bool(s.skipped), -s.gain))
+
+
+def _absorbed(J: np.ndarray, d: np.ndarray, d_perp: np.ndarray, names: Sequence[str]):
+    """(fraction of |d|^2 inside the span of J's columns, the column most aligned with d)."""
+    full = float(d @ d)
+    if full <= 0 or J.size == 0:
+        return 0.0, ""
+    frac = min(1.0, max(0.0, 1.0 - float(d_perp @ d_perp) / full))
+    norms = np.linalg.norm(J, axis=0)
+    cos2 = [(float(J[:, k] @ d) ** 2 / (norms[k] ** 2 * full)) if norms[k] > 0 else 0.0 for k in range(J.shape[1])]
+    return frac, names[int(np.argmax(cos2))]
 
 
 def lambda_for_power(threshold: float, power: float = 0.8) -> float:
@@ -187,19 +212,26 @@ def detection_power(sc: Screen, mf: ModelFit, data: Dataset, threshold: float, n
     else:
         statement += f"; its probe strength ({e.probe:g}{unit}) stays out of reach of 10x the replicates " \
                      "or 16x the packings"
+    if sc.absorbed >= ABSORBED_NOTE:
+        # the statement is first-order at the fitted model; an effect the fitted parameters
+        # can mimic is taken up by them before it leaves a residual
+        statement += (f"; {100 * sc.absorbed:.0f} % of its signature at the probe is what the fitted parameters "
+                      f"can do as well (most of all {sc.absorber}): data that carry it may be fitted by moving "
+                      f"{sc.absorber} instead, so this bound is optimistic")
     return Power(e.name, s80 if inside else math.nan, reps, packs, statement)
 
 
 def screens_table(screens: Sequence[Screen], powers: Mapping[str, Power]) -> str:
     """The screening as a Markdown table."""
-    rows = ["| effect | stage | gain (chi2) | first-order strength | what the data could reveal |",
-            "|---|---|---|---|---|"]
+    rows = ["| effect | stage | gain (chi2) | first-order strength | mimicked by the fit | what the data could reveal |",
+            "|---|---|---|---|---|---|"]
     for s in screens:
         p: Optional[Power] = powers.get(s.effect.name)
         if s.skipped:
-            rows.append(f"| {s.effect.name} | {s.effect.stage} | - | - | {s.skipped} |")
+            rows.append(f"| {s.effect.name} | {s.effect.stage} | - | - | - | {s.skipped} |")
         else:
-            rows.append(f"| {s.effect.name} | {s.effect.stage} | {s.gain:.1f} | {s.strength:.3g} | "
+            mimic = f"{100 * s.absorbed:.0f} % ({s.absorber})" if s.absorber else "-"
+            rows.append(f"| {s.effect.name} | {s.effect.stage} | {s.gain:.1f} | {s.strength:.3g} | {mimic} | "
                         f"{p.statement if p else ''} |")
     return "\n".join(rows)
 

@@ -73,3 +73,26 @@ def test_detection_power_falls_with_more_replicates_and_names_what_would_help():
     p20 = detection_power(sc20, mf20, data20, thr, 20, len(FIT_SEEDS))
     assert p20.detectable < p5.detectable or math.isnan(p5.detectable)
     assert np.isfinite(p20.detectable)
+
+
+def test_power_names_the_parameter_that_can_mimic_an_effect():
+    # an "effect" that is nothing but a stronger bond: sigma_c does all of it
+    def stronger(params, c, seed=0):
+        p = dict(params)
+        p["sigma_c"] = p["sigma_c"] * (1.0 + p.pop("bond.softening", 0.0))
+        return toy(p, c, seed)
+
+    e = LIBRARY["tail"]
+    sim = FunctionSimulator(stronger)
+    data = synthetic_dataset(sim, TRUTH, FIT, noise=0.02, compaction_points=4, seeds=list(range(1000, 1005)))
+    space = Space((Axis("E_b", 30e6, 300e6), Axis("sigma_c", 3e6, 30e6)))
+    mf = fit_model(sim, space, (), data, None, FIT_SEEDS, (100, 101, 102, 103))
+    sc = screen(sim, mf, [e], data, FIT_SEEDS)[0]
+    assert sc.absorbed > 0.75 and sc.absorber == "sigma_c"  # first order: the probe is sigma_c x 1.5
+    p = detection_power(sc, mf, data, 9.1, 5, len(FIT_SEEDS))
+    assert "can do as well (most of all sigma_c)" in p.statement
+    # the toy's pressure trend is more its own than the base parameters'
+    _, data0, mf0 = _baseline({})
+    sc0 = screen(FunctionSimulator(toy), mf0, [LIBRARY["trend"]], data0, FIT_SEEDS)[0]
+    assert 0.0 <= sc0.absorbed < 0.6
+    assert "can do as well" not in detection_power(sc0, mf0, data0, 9.1, 5, len(FIT_SEEDS)).statement
