@@ -17,7 +17,7 @@ import numpy as np
 from .loop_emulator import Axis, Space
 from .loop_models import ModelFit
 
-__all__ = ["EDGE", "pinned", "widened", "rebox", "pinned_note"]
+__all__ = ["EDGE", "pinned", "widened", "rebox", "pinned_list", "pinned_note"]
 
 #: A fitted position this close to an end of the unit box (-) is pinned there.
 EDGE = 0.01
@@ -67,10 +67,14 @@ def rebox(mf: ModelFit, space: Space) -> Tuple[np.ndarray, np.ndarray, np.ndarra
     return np.array(cols, float).T.reshape(len(U), space.dim), mf.emulator.Y, mf.emulator.SE
 
 
+def pinned_list(ends: Sequence[Tuple[Axis, str]], mf: ModelFit) -> str:
+    """"E_b = 2e+08 is at the upper end of its box [2e+07, 2e+08]; ..." for ``ends``."""
+    return "; ".join(f"{a.name} = {mf.fit.params[a.name]:.4g} is at the {end} end of its box [{a.lo:.4g}, {a.hi:.4g}]"
+                     for a, end in ends)
+
+
 def pinned_note(ends: Sequence[Tuple[Axis, str]], mf: ModelFit) -> str:
     """What the report says of parameters still pinned at an end of their box ('' if none)."""
     if not ends:
         return ""
-    parts = [f"{a.name} = {mf.fit.params[a.name]:.4g} is at the {end} end of its box [{a.lo:.4g}, {a.hi:.4g}]"
-             for a, end in ends]
-    return "; ".join(parts) + ": the data ask for a value the box does not allow, and the fit there is the box's"
+    return pinned_list(ends, mf) + ": the data ask for a value the box does not allow, and the fit there is the box's"

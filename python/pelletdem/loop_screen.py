@@ -223,7 +223,8 @@ def detection_power(sc: Screen, mf: ModelFit, data: Dataset, threshold: float, n
 
 def screens_table(screens: Sequence[Screen], powers: Mapping[str, Power]) -> str:
     """The screening as a Markdown table."""
-    rows = ["| effect | stage | gain (chi2) | first-order strength | mimicked by the fit | what the data could reveal |",
+    rows = ["| effect | stage | gain (chi2) | first-order strength | mimicked by the fit "
+            "| what the data could reveal |",
             "|---|---|---|---|---|---|"]
     for s in screens:
         p: Optional[Power] = powers.get(s.effect.name)

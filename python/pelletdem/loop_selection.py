@@ -48,12 +48,12 @@ import numpy as np
 from scipy import stats
 
 from .effects import EFFECTS, Effect, clash
-from .loop_box import pinned, pinned_note, rebox, widened
+from .loop_box import pinned, pinned_list, pinned_note, rebox, widened
 from .loop_data import Condition, Dataset
 from .loop_emulator import Axis, Space
 from .loop_models import ModelFit, chi2_of, fit_model, nested_points
 from .loop_screen import Power, Screen, detection_power, screen
-from .loop_simulators import Simulator
+from .loop_simulators import MAX_WINDOW, Simulator, next_window
 from .residuals import DEFAULT_ALPHA, ResidualSummary, describe
 
 __all__ = ["FIT_SEEDS", "CHECK_SEEDS", "MAX_WINDOW", "unfailed", "Trial", "Step", "LoopResult", "close_loop",
@@ -65,8 +65,6 @@ MAX_WIDEN = 2
 #: Packings every model is designed and fitted on, and the fresh ones its fit is checked on.
 FIT_SEEDS = (0, 1, 2, 3)
 CHECK_SEEDS = (100, 101, 102, 103)
-#: The widest diametral test window (dL/D) the loop widens to.
-MAX_WINDOW = 0.5
 #: Two accepted candidates whose fits differ by less than this in chi2 (each adds one
 #: parameter, so this is their BIC difference) are not told apart by the data: under 2 is "not
 #: worth more than a bare mention" (Kass and Raftery 1995). The better one is added and the
@@ -301,13 +299,12 @@ def close_loop(sim: Simulator, data: Dataset, base_bounds: Mapping[str, Sequence
         late = unfailed(model, fit_data)
         if not late:
             break
-        end = getattr(sim, "max_dLD", math.nan)
-        if getattr(sim, "widen", None) is None or not end < MAX_WINDOW:
+        end, new_end = getattr(sim, "max_dLD", math.nan), next_window(sim)
+        if new_end is None:
             window_note = (f"the fitted model does not fail within the test window (dL/D up to {end:.3g}) at "
                            f"{', '.join(late)}: its sigma_f and dL_f/D there are the end of the test, not a failure")
             say(window_note)
             break
-        new_end = min(MAX_WINDOW, 1.5 * end)
         say(f"the fitted model does not fail within the test window (dL/D up to {end:.3g}) at {', '.join(late)}: "
             f"the tests now run to dL/D = {new_end:.3g} and the model is fitted again")
         sim.widen(new_end)
@@ -321,10 +318,8 @@ def close_loop(sim: Simulator, data: Dataset, base_bounds: Mapping[str, Sequence
         space = widened(model.space, ends)
         if space == model.space:
             break
-        say("the baseline's " + "; ".join(f"{a.name} = {model.fit.params[a.name]:.4g} is at the {end} end of its box"
-                                          for a, end in ends)
-            + ": the box now runs " + ", ".join(f"{a.name} {a.lo:.4g} to {a.hi:.4g}" for a in space.axes)
-            + " and the model is fitted again")
+        say("the baseline's " + pinned_list(ends, model) + ": the box now runs "
+            + ", ".join(f"{a.name} {a.lo:.4g} to {a.hi:.4g}" for a in space.axes) + " and the model is fitted again")
         try:
             model = fit(space, (), dict(model.fit.params), rebox(model, space))
         except ValueError as err:  # the simulator refuses the wider box's parameters

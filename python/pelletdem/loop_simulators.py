@@ -144,6 +144,20 @@ class Simulator:
         self.close()
 
 
+#: The widest diametral test window (dL/D) a simulator is widened to.
+MAX_WINDOW = 0.5
+
+
+def next_window(sim: Simulator) -> Optional[float]:
+    """The end of ``sim``'s diametral test after one widening (x 1.5, at most
+    :data:`MAX_WINDOW`), or None where it cannot widen (no ``widen`` method, or already at
+    MAX_WINDOW): a test that ended before its pellet broke shows no failure."""
+    end = getattr(sim, "max_dLD", math.nan)
+    if getattr(sim, "widen", None) is None or not end < MAX_WINDOW:
+        return None
+    return min(MAX_WINDOW, 1.5 * end)
+
+
 class FunctionSimulator(Simulator):
     """A simulator from a Python function ``fn(params, condition, seed) -> Prediction`` (a
     function of (params, condition) is taken too: it then predicts the same on every packing).

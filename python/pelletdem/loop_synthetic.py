@@ -16,7 +16,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from .loop_data import COMPACTION_SPLIT, DIAMETRAL_GRID, Condition, Dataset, Observation, diametral_part
-from .loop_simulators import Prediction, Simulator
+from .loop_simulators import Prediction, Simulator, next_window
 
 __all__ = ["DATA_SEEDS", "synthetic_dataset"]
 
@@ -39,13 +39,11 @@ def _tested_to_failure(sim: Simulator, truth: Mapping[str, float], conditions: S
                        seeds: Sequence[int]):
     """The replicates' ensembles, each test run until its pellet broke, as a laboratory runs
     it: where a replicate has not failed by the end of the window and the simulator can
-    widen it, the window is widened (x 1.5, up to dL/D = MAX_WINDOW) and the truth simulated
+    widen it, the window is widened (:func:`pelletdem.loop_simulators.next_window`) and the truth simulated
     again; the simulator keeps the wider window."""
-    from .loop_selection import MAX_WINDOW
-
     ensembles = sim.predict(dict(truth), list(conditions), seeds)
-    while _unfailed(ensembles) and getattr(sim, "widen", None) is not None and sim.max_dLD < MAX_WINDOW:
-        sim.widen(min(MAX_WINDOW, 1.5 * sim.max_dLD))
+    while _unfailed(ensembles) and next_window(sim) is not None:
+        sim.widen(next_window(sim))
         ensembles = sim.predict(dict(truth), list(conditions), seeds)
     return ensembles
 
