@@ -100,10 +100,26 @@ class _Spec:
         self.key, self.relax_key = key, relax_key
 
 
-def _timed_runner(log, lock):
+def _timed_runner(log, lock, together=None):
+    """A run that takes 20 ms and logs (relax key, start, end); with ``together`` (a list),
+    the first two runs wait for each other (up to 5 s) and log there whether they met: two
+    runs at once, however loaded the machine."""
+    import threading
     import time
 
+    meet = threading.Barrier(2)
+    count = []
+
     def run(spec):
+        with lock:
+            count.append(spec.key)
+            first_two = len(count) <= 2
+        if together is not None and first_two:
+            try:
+                meet.wait(timeout=5.0)
+                together.append(True)
+            except threading.BrokenBarrierError:
+                together.append(False)
         t0 = time.perf_counter()
         time.sleep(0.02)
         with lock:
@@ -120,17 +136,16 @@ def test_runs_of_one_relaxed_pellet_wait_for_the_first_where_workers_share_pelle
     from pelletdem.run_cache import RunCache
 
     specs = [_Spec(f"k{g}{i}", f"r{g}") for g in range(3) for i in range(4)]
-    log, lock = [], threading.Lock()
+    log, lock, together = [], threading.Lock(), []
     with cf.ThreadPoolExecutor(2) as ex:
-        recs = Evaluator(RunCache(), ex, _timed_runner(log, lock), relaxed_shared=True).run_all(specs[::-1])
+        ev = Evaluator(RunCache(), ex, _timed_runner(log, lock, together), relaxed_shared=True)
+        recs = ev.run_all(specs[::-1])
     assert [r["key"] for r in recs] == [s.key for s in specs[::-1]]  # the order given
     for g in range(3):
         runs = sorted((t0, t1) for r, t0, t1 in log if r == f"r{g}")
         assert len(runs) == 4
         assert all(t0 >= runs[0][1] for t0, _ in runs[1:])  # none began before the first ended
-    # and the pellets' first runs went out together: the two workers were both used
-    firsts = sorted(min(t0 for r, t0, _ in log if r == f"r{g}") for g in range(3))
-    assert firsts[1] < min(t1 for _, _, t1 in log)
+    assert together == [True, True]  # two pellets' first runs went out at once: both workers used
 
 
 def test_runs_of_one_relaxed_pellet_go_out_together_where_workers_do_not_share_pellets():
@@ -141,8 +156,7 @@ def test_runs_of_one_relaxed_pellet_go_out_together_where_workers_do_not_share_p
     from pelletdem.run_cache import RunCache
 
     specs = [_Spec(f"k{i}", "r0") for i in range(4)]
-    log, lock = [], threading.Lock()
+    log, lock, together = [], threading.Lock(), []
     with cf.ThreadPoolExecutor(2) as ex:
-        Evaluator(RunCache(), ex, _timed_runner(log, lock)).run_all(specs)
-    starts = sorted(t0 for _, t0, _ in log)
-    assert starts[1] < min(t1 for _, _, t1 in log)  # two runs of the one pellet at once
+        Evaluator(RunCache(), ex, _timed_runner(log, lock, together)).run_all(specs)
+    assert together == [True, True] and len(log) == 4  # two runs of the one pellet at once

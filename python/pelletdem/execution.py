@@ -18,6 +18,7 @@ import concurrent.futures as cf
 import contextlib
 import multiprocessing
 import os
+import queue
 import threading
 import time
 import warnings
@@ -389,33 +390,21 @@ class Evaluator:
         groups: Dict[str, List[int]] = {}
         for i in order:
             groups.setdefault(specs[i].relax_key, []).append(i)
-        futs = {i: cf.Future() for i in order}
-        stop = threading.Event()
-
-        def relay(i: int, then: Sequence[int] = ()) -> None:
-            if stop.is_set():
-                futs[i].cancel()
-                return
-            inner = self.submit(specs[i])
-
-            def done(f: cf.Future) -> None:
-                for j in then:  # the rest of the group, now that its pellet is relaxed
-                    relay(j)
-                if f.cancelled():
-                    futs[i].cancel()
-                elif f.exception() is not None:
-                    _set(futs[i], error=f.exception())
-                else:
-                    _set(futs[i], result=f.result())
-
-            inner.add_done_callback(done)
-
-        for members in groups.values():
-            relay(members[0], members[1:])
+        # every submission from this thread: an executor's own callback thread may not submit
+        ready: "queue.Queue[str]" = queue.Queue()
+        futs: Dict[int, cf.Future] = {}
         try:
-            return self._gather(futs, len(specs))
-        finally:
-            stop.set()
+            for key, members in groups.items():
+                futs[members[0]] = self.submit(specs[members[0]])
+                futs[members[0]].add_done_callback(lambda _, key=key: ready.put(key))
+            for _ in range(len(groups)):
+                for i in groups[ready.get()][1:]:  # the rest of a group, once its pellet is relaxed
+                    futs[i] = self.submit(specs[i])
+        except BaseException:
+            for f in futs.values():
+                f.cancel()
+            raise
+        return self._gather(futs, len(specs))
 
     @staticmethod
     def _gather(futs: Dict[int, cf.Future], n: int) -> List[dict]:
