@@ -191,7 +191,8 @@ def write_report(res: LoopResult, out_dir: str, title: str = "Discrepancy loop")
               "", "Residual:", ""]
         L += ["    " + s for s in st.residual.lines()]
         if st.screens:
-            L += ["", f"Screening (fit test threshold {st.threshold:.1f}):", "", screens_table(st.screens, res.power)]
+            L += ["", f"Screening (fit test threshold {st.threshold:.1f}):", "",
+                  screens_table(st.screens, st.powers or res.power)]
         for t in st.trials:
             L += ["", f"- **{t.effect.name}** {'added' if t.accepted else 'not added'}: {t.why}. Fitted: "
                   f"{_params(t.model)}."]

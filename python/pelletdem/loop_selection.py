@@ -91,7 +91,8 @@ class Trial:
 class Step:
     """One round of forward selection: the ``model`` it started from, its ``residual``, the
     ``screens``, the ``trials``, the effect ``added`` (None when none was) and its ``rivals``:
-    other accepted candidates that fit within :data:`TIE_CHI2` of it."""
+    other accepted candidates that fit within :data:`TIE_CHI2` of it; ``powers``: what the
+    data could reveal of each screened candidate on top of this round's model."""
 
     model: ModelFit
     residual: ResidualSummary
@@ -101,6 +102,7 @@ class Step:
     threshold: float
     note: str = ""
     rivals: List[str] = field(default_factory=list)
+    powers: Dict[str, Power] = field(default_factory=dict)
 
 
 @dataclass
@@ -348,8 +350,9 @@ def close_loop(sim: Simulator, data: Dataset, base_bounds: Mapping[str, Sequence
         screens = screen(sim, model, remaining, fit_data, fit_seeds)
         k = max(1, sum(1 for s in screens if not s.skipped))
         threshold = max(float(stats.chi2.isf(alpha / k, 1)), math.log(n))
-        for s in screens:
-            powers[s.effect.name] = detection_power(s, model, fit_data, threshold, n_rep, len(fit_seeds))
+        round_powers = {s.effect.name: detection_power(s, model, fit_data, threshold, n_rep, len(fit_seeds))
+                        for s in screens}
+        powers.update(round_powers)
         say("screened: " + ", ".join(f"{s.effect.name} {s.gain:.1f}" if not s.skipped else f"{s.effect.name} (-)"
                                      for s in screens) + f"; fit test threshold {threshold:.1f}")
         trials: List[Trial] = []
@@ -363,7 +366,7 @@ def close_loop(sim: Simulator, data: Dataset, base_bounds: Mapping[str, Sequence
             note = (f"on fresh packings the model's chi2 ({base_before:.1f} on {n_check} points) is within the "
                     f"noise level ({noise_level:.1f}): no candidate could be confirmed there, none was fitted")
             say(note)
-            steps.append(Step(model, residual, screens, [], None, threshold, note))
+            steps.append(Step(model, residual, screens, [], None, threshold, note, powers=round_powers))
             break
         gate = max(3.84, 0.5 * threshold) if screen_threshold is None else screen_threshold
         for s in [s for s in screens if not s.skipped and s.gain >= gate][:screen_top]:
@@ -396,7 +399,7 @@ def close_loop(sim: Simulator, data: Dataset, base_bounds: Mapping[str, Sequence
         rivals = [t.effect.name for t in accepted if added is not None and t is not added
                   and added.delta_chi2 - t.delta_chi2 < TIE_CHI2]
         steps.append(Step(model, residual, screens, trials, added.effect.name if added else None, threshold,
-                          rivals=rivals))
+                          rivals=rivals, powers=round_powers))
         if added is None:
             break
         chosen.append(added.effect.name)

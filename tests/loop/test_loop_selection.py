@@ -73,6 +73,21 @@ def test_every_step_is_reported():
     assert res.steps[-1].added is None
     assert "baseline + tail" in res.table()
     assert res.n_simulations > 0 and res.wall_time_s > 0
+    # each round says what the data could reveal on top of its own model
+    second = res.steps[1]
+    assert second.screens and set(first.powers) >= {s.effect.name for s in second.screens}
+    assert any(first.powers[k].statement != p.statement for k, p in second.powers.items())
+    assert res.power == {**first.powers, **second.powers}
+
+
+def test_the_report_shows_each_round_s_own_power(tmp_path):
+    from pelletdem.loop_report import write_report
+
+    res = toy_loop(LIBRARY["tail"].settings(1.0), 0)
+    text = open(write_report(res, str(tmp_path), "toy")).read()
+    for st in res.steps:
+        for p in st.powers.values():
+            assert p.statement in text
 
 
 def test_bad_arguments_are_refused_before_any_simulation():
