@@ -27,7 +27,9 @@ procedure is forward selection:
    conditions) falls by at least 4 and by ``min_check_gain`` of the model's excess over the
    number of points, where that chi2 was above what noise gives (n + 2 sqrt(2 n)): a model
    already at the noise level on fresh packings has nothing there to gain; and the held-out
-   conditions' chi2 does not rise by more than its noise (2 sqrt(2 n_held)). The fresh
+   conditions' chi2 does not rise by more than its noise (2 sqrt(2 n_held)), and the RRMSE
+   (eq. 16) of all the data on those packings does not rise (a chi2 can fall by fitting
+   the most precise observations, a density, at the cost of all the others). The fresh
    packings are what a lucky packing cannot pass: an effect acting during compaction
    re-packs the pellet at every strength, and the fit may pick the strength whose packing
    happens to match; the check's packings are new at every strength alike. The best accepted
@@ -218,6 +220,13 @@ def _errors(mf: ModelFit, fit_data: Dataset, heldout: Optional[Dataset]) -> Dict
             "heldout_rrmse": _rrmse(mf.check, heldout)}
 
 
+def _check_rrmse(mf: ModelFit, fit_data: Dataset, heldout: Optional[Dataset]) -> float:
+    """RRMSE (eq. 16) of all the data (fit and held-out conditions) on the check seeds."""
+    n_f, n_h = len(fit_data), len(heldout) if heldout is not None else 0
+    sq = n_f * _rrmse(mf.check, fit_data) ** 2 + (n_h * _rrmse(mf.check, heldout) ** 2 if n_h else 0.0)
+    return math.sqrt(sq / (n_f + n_h))
+
+
 def _check_chi2(mf: ModelFit) -> float:
     """chi2 of all the data on the check seeds."""
     held = chi2_of(mf.z_check_held) if mf.z_check_held is not None else 0.0
@@ -357,6 +366,7 @@ def close_loop(sim: Simulator, data: Dataset, base_bounds: Mapping[str, Sequence
                                      for s in screens) + f"; fit test threshold {threshold:.1f}")
         trials: List[Trial] = []
         base_before, held_before = _check_chi2(model), _held_chi2(model)
+        rrmse_before = _check_rrmse(model, fit_data, heldout)
         n_held = len(heldout) if heldout is not None else 0
         n_check = n + n_held
         noise_level = n_check + 2.0 * math.sqrt(2.0 * n_check)
@@ -387,6 +397,10 @@ def close_loop(sim: Simulator, data: Dataset, base_bounds: Mapping[str, Sequence
             elif n_held and held_worse > 2.0 * math.sqrt(2.0 * n_held):
                 ok, why = False, (f"the held-out chi2 rose {held_before:.1f} -> {held_after:.1f} on fresh packings: "
                                   "it does not carry over to the held-out conditions")
+            elif _check_rrmse(cand, fit_data, heldout) > rrmse_before:
+                ok, why = False, (f"the RRMSE on fresh packings rose {rrmse_before:.3f} -> "
+                                  f"{_check_rrmse(cand, fit_data, heldout):.3f}: its chi2 fell by fitting the most "
+                                  "precise observations at the others' cost")
             else:
                 ok, why = True, (f"fit chi2 -{drop:.1f} (threshold {threshold:.1f}); chi2 on fresh packings "
                                  f"{base_before:.1f} -> {after:.1f}" + (f" (held out {held_before:.1f} -> "
