@@ -44,7 +44,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Callable, Dict, List, Mapping, Optional, Sequence
+from typing import Callable, Dict, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 from scipy import stats
@@ -237,6 +237,46 @@ def _held_chi2(mf: ModelFit) -> float:
     return chi2_of(mf.z_check_held) if mf.z_check_held is not None else 0.0
 
 
+@dataclass(frozen=True)
+class Gates:
+    """What a candidate must pass: the fit test's ``threshold`` (chi2 drop), the number of
+    points checked on fresh packings (``n_check``, of which ``n_held`` held out) and the
+    fraction of the model's excess chi2 there it must remove (``min_check_gain``)."""
+
+    threshold: float
+    n_check: int
+    n_held: int
+    min_check_gain: float
+
+
+def judge(g: Gates, drop: float, before: Tuple[float, float, float],
+          after: Tuple[float, float, float]) -> Tuple[bool, str]:
+    """Whether a candidate is accepted, and why.
+
+    ``drop``: the fall of its fit chi2; ``before`` / ``after``: (chi2 of all data, chi2 of the
+    held-out data, RRMSE of all data) on the check packings, for the model without and with the
+    candidate. The gates, in order: the fit test; a real fall of chi2 on fresh packings (a
+    lucky packing cannot pass it); no rise of the held-out chi2 beyond its own scatter; no rise
+    of the RRMSE (eq. 16), which a candidate fitting the most precise observations at the
+    others' cost would show.
+    """
+    (base_before, held_before, rrmse_before), (base_after, held_after, rrmse_after) = before, after
+    need = max(4.0, g.min_check_gain * (base_before - g.n_check))
+    if drop < g.threshold:
+        return False, f"fit chi2 fell by {drop:.1f}, below the threshold {g.threshold:.1f}"
+    if base_before - base_after < need:
+        return False, f"chi2 on fresh packings {base_before:.1f} -> {base_after:.1f}: it needed to fall by {need:.1f}"
+    if g.n_held and held_after - held_before > 2.0 * math.sqrt(2.0 * g.n_held):
+        return False, (f"the held-out chi2 rose {held_before:.1f} -> {held_after:.1f} on fresh packings: "
+                       "it does not carry over to the held-out conditions")
+    if rrmse_after > rrmse_before:
+        return False, (f"the RRMSE on fresh packings rose {rrmse_before:.3f} -> {rrmse_after:.3f}: its chi2 "
+                       "fell by fitting the most precise observations at the others' cost")
+    return True, (f"fit chi2 -{drop:.1f} (threshold {g.threshold:.1f}); chi2 on fresh packings "
+                  f"{base_before:.1f} -> {base_after:.1f}"
+                  + (f" (held out {held_before:.1f} -> {held_after:.1f})" if g.n_held else ""))
+
+
 def close_loop(sim: Simulator, data: Dataset, base_bounds: Mapping[str, Sequence[float]],
                start: Optional[Mapping[str, float]] = None, *,
                held_out: Optional[Callable[[Condition], bool]] = None,
@@ -388,23 +428,8 @@ def close_loop(sim: Simulator, data: Dataset, base_bounds: Mapping[str, Sequence
             drop = model.fit.chi2 - cand.fit.chi2
             after, held_after = _check_chi2(cand), _held_chi2(cand)
             rrmse_after = _check_rrmse(cand, fit_data, heldout)
-            need = max(4.0, min_check_gain * (base_before - n_check))
-            held_worse = held_after - held_before
-            if drop < threshold:
-                ok, why = False, f"fit chi2 fell by {drop:.1f}, below the threshold {threshold:.1f}"
-            elif base_before - after < need:
-                ok, why = False, (f"chi2 on fresh packings {base_before:.1f} -> {after:.1f}: it needed to fall "
-                                  f"by {need:.1f}")
-            elif n_held and held_worse > 2.0 * math.sqrt(2.0 * n_held):
-                ok, why = False, (f"the held-out chi2 rose {held_before:.1f} -> {held_after:.1f} on fresh packings: "
-                                  "it does not carry over to the held-out conditions")
-            elif rrmse_after > rrmse_before:
-                ok, why = False, (f"the RRMSE on fresh packings rose {rrmse_before:.3f} -> {rrmse_after:.3f}: its chi2 "
-                                  "fell by fitting the most precise observations at the others' cost")
-            else:
-                ok, why = True, (f"fit chi2 -{drop:.1f} (threshold {threshold:.1f}); chi2 on fresh packings "
-                                 f"{base_before:.1f} -> {after:.1f}" + (f" (held out {held_before:.1f} -> "
-                                                                         f"{held_after:.1f})" if n_held else ""))
+            ok, why = judge(Gates(threshold, n_check, n_held, min_check_gain), drop,
+                            (base_before, held_before, rrmse_before), (after, held_after, rrmse_after))
             trials.append(Trial(e, cand, drop, base_before, after, ok, why))
             errors[cand.name] = _errors(cand, fit_data, heldout)
             say(f"{e.name}: {'accepted' if ok else 'not accepted'}: {why}")

@@ -247,3 +247,33 @@ def test_a_parameter_the_box_cannot_reach_is_said_in_the_verdict():
     assert "sigma_c = " in res.verdict and "is at the upper end of its box" in res.verdict
     first = 4e6 * (4 / 3) ** 0.5
     assert res.baseline.space.axes[1].hi == pytest.approx(first * (first / 3e6) ** 0.5)
+
+
+def test_each_gate_refuses_on_its_own():
+    """A candidate passing every other gate is refused by the one it fails; the RRMSE gate
+    refuses a candidate whose chi2 fell everywhere it was counted but whose relative error
+    rose (a precise density fitted at the curves' cost)."""
+    from pelletdem.loop_selection import Gates, judge
+
+    g = Gates(threshold=10.0, n_check=40, n_held=13, min_check_gain=0.25)
+    before = (120.0, 30.0, 0.15)          # chi2 all, chi2 held out, RRMSE on fresh packings
+    good = (60.0, 20.0, 0.08)
+    ok, why = judge(g, 25.0, before, good)
+    assert ok and "120.0 -> 60.0" in why and "held out 30.0 -> 20.0" in why
+    # the fit test: one chi2 unit short of the threshold
+    ok, why = judge(g, 9.0, before, good)
+    assert not ok and "below the threshold 10.0" in why
+    # fresh packings: needs max(4, 0.25 * (120 - 40)) = 20; a fall of 19 is not enough
+    ok, why = judge(g, 25.0, before, (101.0, 20.0, 0.08))
+    assert not ok and "needed to fall by 20.0" in why
+    # held out: a rise beyond 2 sqrt(2 * 13) = 10.2 is refused, one of 10 is not
+    ok, why = judge(g, 25.0, before, (60.0, 40.3, 0.08))
+    assert not ok and "does not carry over" in why
+    assert judge(g, 25.0, before, (60.0, 40.0, 0.08))[0]
+    # RRMSE: every chi2 gate passed, relative error up
+    ok, why = judge(g, 25.0, before, (60.0, 20.0, 0.151))
+    assert not ok and "RRMSE on fresh packings rose 0.150 -> 0.151" in why
+    # without held-out conditions the held-out gate does not apply
+    g0 = Gates(threshold=10.0, n_check=27, n_held=0, min_check_gain=0.25)
+    ok, why = judge(g0, 25.0, (120.0, 0.0, 0.15), (60.0, 0.0, 0.08))
+    assert ok and "held out" not in why
