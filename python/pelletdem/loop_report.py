@@ -197,8 +197,9 @@ def write_report(res: LoopResult, out_dir: str, title: str = "Discrepancy loop")
             L += ["", f"- **{t.effect.name}** {'added' if t.accepted else 'not added'}: {t.why}. Fitted: "
                   f"{_params(t.model)}."]
         if st.rivals:
-            L += ["", f"- {st.added} and {' and '.join(st.rivals)} fit within a chi2 of 2 of each other (their BIC "
-                  f"difference): these data do not tell them apart; {st.added} was added for the larger fall."]
+            L += ["", f"- {st.added} and {' and '.join(st.rivals)} fit as well (on fresh packings their chi2 within 2 "
+                  "of each other, their BIC difference, or the emulated fit preferring the other): these data do not "
+                  f"tell them apart; {st.added} was added for the lower chi2 on fresh packings."]
         L.append("")
     if "screen" in figs:
         L += [f"![screening]({os.path.basename(figs['screen'])})", ""]

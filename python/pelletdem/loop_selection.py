@@ -28,12 +28,13 @@ procedure is forward selection:
    number of points, where that chi2 was above what noise gives (n + 2 sqrt(2 n)): a model
    already at the noise level on fresh packings has nothing there to gain; and the held-out
    conditions' chi2 does not rise by more than its noise (2 sqrt(2 n_held)), and the RRMSE
-   (eq. 16) of all the data on those packings does not rise (a chi2 can fall by fitting
+   (eq. 16) of all the data on those packings does not rise by more than twice its scatter
+   between them (a jackknife over the packings; a chi2 can fall by fitting
    the most precise observations, a density, at the cost of all the others). The fresh
    packings are what a lucky packing cannot pass: an effect acting during compaction
    re-packs the pellet at every strength, and the fit may pick the strength whose packing
    happens to match; the check's packings are new at every strength alike. The best accepted
-   candidate (largest chi2 drop) is added, even if what remains is still structured, and the
+   candidate (lowest chi2 on the check seeds) is added, even if what remains is still structured, and the
    loop goes back to 3 with the rest, up to ``max_effects``.
 6. **Report** every step: residual, screening, full fits, the effect added and why the others
    were not, errors before and after on fit and held-out data, and what the data could have
@@ -55,7 +56,7 @@ from .loop_data import Condition, Dataset
 from .loop_emulator import Axis, Space
 from .loop_models import ModelFit, chi2_of, fit_model, nested_points
 from .loop_screen import Power, Screen, detection_power, screen
-from .loop_simulators import MAX_WINDOW, Simulator, next_window
+from .loop_simulators import MAX_WINDOW, Ensemble, Simulator, next_window
 from .residuals import DEFAULT_ALPHA, ResidualSummary, describe
 
 __all__ = ["FIT_SEEDS", "CHECK_SEEDS", "MAX_WINDOW", "unfailed", "Trial", "Step", "LoopResult", "close_loop",
@@ -67,10 +68,10 @@ MAX_WIDEN = 2
 #: Packings every model is designed and fitted on, and the fresh ones its fit is checked on.
 FIT_SEEDS = (0, 1, 2, 3)
 CHECK_SEEDS = (100, 101, 102, 103)
-#: Two accepted candidates whose fits differ by less than this in chi2 (each adds one
-#: parameter, so this is their BIC difference) are not told apart by the data: under 2 is "not
-#: worth more than a bare mention" (Kass and Raftery 1995). The better one is added and the
-#: other named beside it.
+#: Two accepted candidates whose chi2 on fresh packings differ by less than this (each adds one
+#: parameter, so this is their BIC difference there) are not told apart by the data: under 2 is
+#: "not worth more than a bare mention" (Kass and Raftery 1995). The better one is added and
+#: the other named beside it, as is one whose emulated fit was the better.
 TIE_CHI2 = 2.0
 
 
@@ -93,7 +94,8 @@ class Trial:
 class Step:
     """One round of forward selection: the ``model`` it started from, its ``residual``, the
     ``screens``, the ``trials``, the effect ``added`` (None when none was) and its ``rivals``:
-    other accepted candidates that fit within :data:`TIE_CHI2` of it; ``powers``: what the
+    other accepted candidates within :data:`TIE_CHI2` of it on fresh packings or better in the
+    emulated fit; ``powers``: what the
     data could reveal of each screened candidate on top of this round's model."""
 
     model: ModelFit
@@ -220,11 +222,35 @@ def _errors(mf: ModelFit, fit_data: Dataset, heldout: Optional[Dataset]) -> Dict
             "heldout_rrmse": _rrmse(mf.check, heldout)}
 
 
+def _rrmse_all(check: Mapping[Condition, Ensemble], fit_data: Dataset, heldout: Optional[Dataset]) -> float:
+    n_f, n_h = len(fit_data), len(heldout) if heldout is not None else 0
+    sq = n_f * _rrmse(check, fit_data) ** 2 + (n_h * _rrmse(check, heldout) ** 2 if n_h else 0.0)
+    return math.sqrt(sq / (n_f + n_h))
+
+
 def _check_rrmse(mf: ModelFit, fit_data: Dataset, heldout: Optional[Dataset]) -> float:
     """RRMSE (eq. 16) of all the data (fit and held-out conditions) on the check seeds."""
-    n_f, n_h = len(fit_data), len(heldout) if heldout is not None else 0
-    sq = n_f * _rrmse(mf.check, fit_data) ** 2 + (n_h * _rrmse(mf.check, heldout) ** 2 if n_h else 0.0)
-    return math.sqrt(sq / (n_f + n_h))
+    return _rrmse_all(mf.check, fit_data, heldout)
+
+
+def _without(check: Mapping[Condition, Ensemble], j: int) -> Dict[Condition, Ensemble]:
+    return {c: Ensemble(e.seeds[:j] + e.seeds[j + 1:], e.members[:j] + e.members[j + 1:]) for c, e in check.items()}
+
+
+def rrmse_rise_se(before: ModelFit, after: ModelFit, fit_data: Dataset, heldout: Optional[Dataset]) -> float:
+    """Standard error of the rise of the check seeds' RRMSE from ``before`` to ``after`` (both
+    checked on the same packings): the jackknife over those packings, leaving each out of both
+    models' means in turn. The rise's scatter between packings, not the data's noise, which
+    the two models share. 0 with fewer than three packings (no tolerance)."""
+    k = min(len(e.members) for e in (*before.check.values(), *after.check.values()))
+    if k < 3:
+        return 0.0
+    d = np.array([_rrmse_all(_without(after.check, j), fit_data, heldout)
+                  - _rrmse_all(_without(before.check, j), fit_data, heldout) for j in range(k)])
+    d = d[np.isfinite(d)]
+    if len(d) < 3:
+        return 0.0
+    return float(math.sqrt((len(d) - 1) / len(d) * np.sum((d - d.mean()) ** 2)))
 
 
 def _check_chi2(mf: ModelFit) -> float:
@@ -250,15 +276,16 @@ class Gates:
 
 
 def judge(g: Gates, drop: float, before: Tuple[float, float, float],
-          after: Tuple[float, float, float]) -> Tuple[bool, str]:
+          after: Tuple[float, float, float], rrmse_se: float = 0.0) -> Tuple[bool, str]:
     """Whether a candidate is accepted, and why.
 
     ``drop``: the fall of its fit chi2; ``before`` / ``after``: (chi2 of all data, chi2 of the
     held-out data, RRMSE of all data) on the check packings, for the model without and with the
-    candidate. The gates, in order: the fit test; a real fall of chi2 on fresh packings (a
-    lucky packing cannot pass it); no rise of the held-out chi2 beyond its own scatter; no rise
-    of the RRMSE (eq. 16), which a candidate fitting the most precise observations at the
-    others' cost would show.
+    candidate; ``rrmse_se``: the standard error of the RRMSE's rise (:func:`rrmse_rise_se`).
+    The gates, in order: the fit test; a real fall of chi2 on fresh packings (a lucky packing
+    cannot pass it); no rise of the held-out chi2 beyond its own scatter; no rise of the
+    RRMSE (eq. 16) beyond twice its scatter between packings, which a candidate fitting the
+    most precise observations at the others' cost would show.
     """
     (base_before, held_before, rrmse_before), (base_after, held_after, rrmse_after) = before, after
     need = max(4.0, g.min_check_gain * (base_before - g.n_check))
@@ -269,12 +296,29 @@ def judge(g: Gates, drop: float, before: Tuple[float, float, float],
     if g.n_held and held_after - held_before > 2.0 * math.sqrt(2.0 * g.n_held):
         return False, (f"the held-out chi2 rose {held_before:.1f} -> {held_after:.1f} on fresh packings: "
                        "it does not carry over to the held-out conditions")
-    if rrmse_after > rrmse_before:
-        return False, (f"the RRMSE on fresh packings rose {rrmse_before:.3f} -> {rrmse_after:.3f}: its chi2 "
-                       "fell by fitting the most precise observations at the others' cost")
+    if rrmse_after - rrmse_before > 2.0 * rrmse_se:
+        return False, (f"the RRMSE on fresh packings rose {rrmse_before:.3f} -> {rrmse_after:.3f}, more than twice "
+                       f"its scatter between packings ({rrmse_se:.3f}): its chi2 fell by fitting the most precise "
+                       "observations at the others' cost")
     return True, (f"fit chi2 -{drop:.1f} (threshold {g.threshold:.1f}); chi2 on fresh packings "
                   f"{base_before:.1f} -> {base_after:.1f}"
                   + (f" (held out {held_before:.1f} -> {held_after:.1f})" if g.n_held else ""))
+
+
+def pick(accepted: Sequence[Trial]) -> Tuple[Optional[Trial], List[str]]:
+    """The accepted candidate to add and the names of its rivals.
+
+    The one with the lowest chi2 on fresh packings is added: those are real simulations the
+    fit never saw, where the emulated fit chi2 is in-sample and can favour a surface that bent
+    to the fit packings' scatter. A rival is another accepted candidate within
+    :data:`TIE_CHI2` of it there, or one the emulated fit preferred: the two measures then
+    disagree, and the data do not tell the two apart.
+    """
+    if not accepted:
+        return None, []
+    added = min(accepted, key=lambda t: t.check_after)
+    return added, [t.effect.name for t in accepted if t is not added
+                   and (t.check_after - added.check_after < TIE_CHI2 or t.delta_chi2 > added.delta_chi2)]
 
 
 def close_loop(sim: Simulator, data: Dataset, base_bounds: Mapping[str, Sequence[float]],
@@ -429,14 +473,12 @@ def close_loop(sim: Simulator, data: Dataset, base_bounds: Mapping[str, Sequence
             after, held_after = _check_chi2(cand), _held_chi2(cand)
             rrmse_after = _check_rrmse(cand, fit_data, heldout)
             ok, why = judge(Gates(threshold, n_check, n_held, min_check_gain), drop,
-                            (base_before, held_before, rrmse_before), (after, held_after, rrmse_after))
+                            (base_before, held_before, rrmse_before), (after, held_after, rrmse_after),
+                            rrmse_rise_se(model, cand, fit_data, heldout))
             trials.append(Trial(e, cand, drop, base_before, after, ok, why))
             errors[cand.name] = _errors(cand, fit_data, heldout)
             say(f"{e.name}: {'accepted' if ok else 'not accepted'}: {why}")
-        accepted = [t for t in trials if t.accepted]
-        added = max(accepted, key=lambda t: t.delta_chi2) if accepted else None
-        rivals = [t.effect.name for t in accepted if added is not None and t is not added
-                  and added.delta_chi2 - t.delta_chi2 < TIE_CHI2]
+        added, rivals = pick([t for t in trials if t.accepted])
         steps.append(Step(model, residual, screens, trials, added.effect.name if added else None, threshold,
                           rivals=rivals, powers=round_powers))
         if added is None:

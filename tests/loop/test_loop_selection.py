@@ -270,10 +270,60 @@ def test_each_gate_refuses_on_its_own():
     ok, why = judge(g, 25.0, before, (60.0, 40.3, 0.08))
     assert not ok and "does not carry over" in why
     assert judge(g, 25.0, before, (60.0, 40.0, 0.08))[0]
-    # RRMSE: every chi2 gate passed, relative error up
+    # RRMSE: every chi2 gate passed, relative error up; with no scatter any rise is refused,
+    # with the rise's scatter between packings only one beyond twice it
     ok, why = judge(g, 25.0, before, (60.0, 20.0, 0.151))
     assert not ok and "RRMSE on fresh packings rose 0.150 -> 0.151" in why
+    assert judge(g, 25.0, before, (60.0, 20.0, 0.159), rrmse_se=0.005)[0]
+    ok, why = judge(g, 25.0, before, (60.0, 20.0, 0.161), rrmse_se=0.005)
+    assert not ok and "twice its scatter between packings (0.005)" in why
     # without held-out conditions the held-out gate does not apply
     g0 = Gates(threshold=10.0, n_check=27, n_held=0, min_check_gain=0.25)
     ok, why = judge(g0, 25.0, (120.0, 0.0, 0.15), (60.0, 0.0, 0.08))
     assert ok and "held out" not in why
+
+
+def test_the_candidate_added_is_the_best_on_fresh_packings():
+    """Between accepted candidates the fresh packings decide; one the emulated fit preferred,
+    or one within a chi2 of 2 there, is named beside it; a clear winner on both has none."""
+    from pelletdem.effects import EFFECTS
+    from pelletdem.loop_selection import Trial, pick
+
+    def trial(name, drop, after):
+        return Trial(EFFECTS[name], None, drop, 77.0, after, True, "")
+
+    # in-sample the saturating law fitted better (46.2 against 40.0); on fresh packings the
+    # growing one did (22.3 against 26.1)
+    added, rivals = pick([trial("saturating_unloading", 46.2, 26.1), trial("unloading_growth", 40.0, 22.3)])
+    assert added.effect.name == "unloading_growth" and rivals == ["saturating_unloading"]
+    # better on both: no rival
+    added, rivals = pick([trial("saturating_unloading", 30.0, 26.1), trial("unloading_growth", 40.0, 22.3)])
+    assert added.effect.name == "unloading_growth" and rivals == []
+    # within 2 on fresh packings: a rival whichever the fit preferred
+    added, rivals = pick([trial("hardening", 30.0, 23.9), trial("unloading_growth", 40.0, 22.3)])
+    assert added.effect.name == "unloading_growth" and rivals == ["hardening"]
+    assert pick([]) == (None, [])
+
+
+def test_the_rrmse_rise_scatter_is_a_jackknife_over_the_check_packings():
+    """The same model checked twice rises by 0 with scatter 0; another model's rise has the
+    jackknife's scatter, worked here by hand from the leave-one-out RRMSEs."""
+    from types import SimpleNamespace
+
+    from pelletdem.loop_selection import _rrmse_all, _without, rrmse_rise_se
+
+    sim = FunctionSimulator(toy)
+    data = synthetic_dataset(sim, TRUTH, FIT + HELD, noise=0.02, compaction_points=4,
+                             seeds=[1000 + k for k in range(5)], seed=0)
+    fit_data, held = data.split(lambda c: c in HELD)
+    seeds = (100, 101, 102, 103)
+    a = SimpleNamespace(check=sim.predict(START, FIT + HELD, seeds))
+    b = SimpleNamespace(check=sim.predict(TRUTH, FIT + HELD, seeds))
+    assert rrmse_rise_se(a, a, fit_data, held) == 0.0
+    d = np.array([_rrmse_all(_without(b.check, j), fit_data, held) - _rrmse_all(_without(a.check, j), fit_data, held)
+                  for j in range(4)])
+    se = rrmse_rise_se(a, b, fit_data, held)
+    assert se > 0 and se == pytest.approx(math.sqrt(3 / 4 * np.sum((d - d.mean()) ** 2)), rel=1e-12)
+    # fewer than three packings: no tolerance
+    two = SimpleNamespace(check=sim.predict(TRUTH, FIT + HELD, seeds[:2]))
+    assert rrmse_rise_se(two, two, fit_data, held) == 0.0
