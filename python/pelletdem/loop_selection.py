@@ -302,7 +302,8 @@ def judge(g: Gates, drop: float, before: Tuple[float, float, float],
                        "observations at the others' cost")
     return True, (f"fit chi2 -{drop:.1f} (threshold {g.threshold:.1f}); chi2 on fresh packings "
                   f"{base_before:.1f} -> {base_after:.1f}"
-                  + (f" (held out {held_before:.1f} -> {held_after:.1f})" if g.n_held else ""))
+                  + (f" (held out {held_before:.1f} -> {held_after:.1f})" if g.n_held else "")
+                  + f"; RRMSE {rrmse_before:.3f} -> {rrmse_after:.3f} (its rise's scatter {rrmse_se:.3f})")
 
 
 def pick(accepted: Sequence[Trial]) -> Tuple[Optional[Trial], List[str]]:

@@ -259,7 +259,7 @@ def test_each_gate_refuses_on_its_own():
     before = (120.0, 30.0, 0.15)          # chi2 all, chi2 held out, RRMSE on fresh packings
     good = (60.0, 20.0, 0.08)
     ok, why = judge(g, 25.0, before, good)
-    assert ok and "120.0 -> 60.0" in why and "held out 30.0 -> 20.0" in why
+    assert ok and "120.0 -> 60.0" in why and "held out 30.0 -> 20.0" in why and "RRMSE 0.150 -> 0.080" in why
     # the fit test: one chi2 unit short of the threshold
     ok, why = judge(g, 9.0, before, good)
     assert not ok and "below the threshold 10.0" in why
