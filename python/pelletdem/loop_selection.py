@@ -60,7 +60,7 @@ from .loop_simulators import MAX_WINDOW, Ensemble, Simulator, next_window
 from .residuals import DEFAULT_ALPHA, ResidualSummary, describe
 
 __all__ = ["FIT_SEEDS", "CHECK_SEEDS", "MAX_WINDOW", "unfailed", "Trial", "Step", "LoopResult", "close_loop",
-           "describe_residual"]
+           "describe_residual", "Gates", "judge", "pick", "rrmse_rise_se"]
 
 #: Times the baseline's box is widened where its fit is pinned at an end (pelletdem.loop_box).
 MAX_WIDEN = 2
@@ -95,8 +95,8 @@ class Step:
     """One round of forward selection: the ``model`` it started from, its ``residual``, the
     ``screens``, the ``trials``, the effect ``added`` (None when none was) and its ``rivals``:
     other accepted candidates within :data:`TIE_CHI2` of it on fresh packings or better in the
-    emulated fit; ``powers``: what the
-    data could reveal of each screened candidate on top of this round's model."""
+    emulated fit; ``powers``: what the data could reveal of each screened candidate on top of
+    this round's model."""
 
     model: ModelFit
     residual: ResidualSummary
