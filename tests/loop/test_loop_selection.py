@@ -327,3 +327,30 @@ def test_the_rrmse_rise_scatter_is_a_jackknife_over_the_check_packings():
     # fewer than three packings: no tolerance
     two = SimpleNamespace(check=sim.predict(TRUTH, FIT + HELD, seeds[:2]))
     assert rrmse_rise_se(two, two, fit_data, held) == 0.0
+
+
+def test_the_rrmse_rise_scatter_of_one_observation_is_the_standard_error_of_a_mean():
+    """One observation predicted above its measured value on every packing: RRMSE is (mean -
+    v) / v, linear in the packings' mean, and the jackknife of a mean is exactly the standard
+    error of the mean, SD(b - a) / sqrt(k) / v, with b - a the packings' paired rises."""
+    from types import SimpleNamespace
+
+    from pelletdem.loop import Condition, Dataset, Observation
+    from pelletdem.loop_selection import rrmse_rise_se
+    from pelletdem.loop_simulators import Ensemble
+
+    cond = Condition(60e6)
+    v = 1.0e6
+    data = Dataset([Observation(cond, "sigma_f", float("nan"), v, 0.05e6, 5)])
+    a = np.array([1.30e6, 1.10e6, 1.25e6, 1.40e6, 1.15e6])
+    b = np.array([1.50e6, 1.20e6, 1.60e6, 1.45e6, 1.35e6])
+
+    def model(values):
+        members = tuple(Prediction(scalars={"sigma_f": float(x)}) for x in values)
+        return SimpleNamespace(check={cond: Ensemble(tuple(range(len(values))), members)})
+
+    rise = b - a
+    expected = rise.std(ddof=1) / math.sqrt(len(rise)) / v
+    assert rrmse_rise_se(model(a), model(b), data, None) == pytest.approx(expected, rel=1e-12)
+    # a rise common to every packing has no scatter: the data's noise is shared by both models
+    assert rrmse_rise_se(model(a), model(a + 0.2e6), data, None) == pytest.approx(0.0, abs=1e-12)
