@@ -127,6 +127,43 @@ def _fig_screen(res: LoopResult, path: str) -> str:
     return _save(plt, fig, path)
 
 
+def _paper_variants(res: LoopResult) -> Dict:
+    """The paper's variant of each condition of the data, when every condition is one of the
+    paper's 12 ({Condition: Variant}); {} otherwise."""
+    from .paper_tables import variants
+
+    by_key = {(v.material, float(v.mc_percent), float(v.sigma_z)): v for v in variants()}
+    conds = list(res.fit_data.conditions) + (list(res.heldout_data.conditions) if res.heldout_data is not None else [])
+    out = {c: by_key.get((c.material, float(c.mc), float(c.sigma_z))) for c in conds}
+    return out if all(out.values()) else {}
+
+
+def _fig_coordination(res: LoopResult, variants: Dict, path: str) -> str:
+    """The paper's Fig. 10 for the relaxed pellets: bulk CN against BD_p / BD_w (BD_w the
+    intact wood's bulk density, Table 2), the paper's (its measured BD_p with SD, its fitted
+    CN of Table 5) beside the baseline's and the final model's on fresh packings."""
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(5.4, 4.2))
+    conds = list(variants)
+    bdw = np.array([variants[c].bd_wood for c in conds])
+    ax.errorbar([variants[c].bd_pellet for c in conds] / bdw, [variants[c].cn for c in conds],
+                xerr=[variants[c].bd_pellet_sd for c in conds] / bdw, fmt="o", ms=4, color="k",
+                label="paper: measured BD_p, Table 5 CN")
+    models = [(res.baseline, "s", "tab:red")] + ([(res.final, "^", "tab:blue")] if res.chosen else [])
+    for mf, marker, colour in models:
+        x = np.array([mf.check[c].scalar("bulk_density") for c in conds]) / bdw
+        y = [mf.check[c].scalar("coordination_number") for c in conds]
+        ax.plot(x, y, marker, ms=5, mfc="none", color=colour, label=f"{mf.name}, relaxed (bulk CN)")
+    for k, (c, xv, yv) in enumerate(zip(conds, [variants[c].bd_pellet for c in conds] / bdw,
+                                        [variants[c].cn for c in conds])):
+        # alternate above and below: variants of one CN in Table 5 sit on top of each other
+        ax.annotate(c.label, (xv, yv), fontsize=5, xytext=(3, 4 if k % 2 == 0 else -8), textcoords="offset points")
+    ax.set_xlabel("$BD_p / BD_w$")
+    ax.set_ylabel("coordination number CN")
+    ax.legend(fontsize=7)
+    return _save(plt, fig, path)
+
+
 def _params(mf: ModelFit) -> str:
     out = []
     for name in mf.space.names:
@@ -171,6 +208,9 @@ def write_report(res: LoopResult, out_dir: str, title: str = "Discrepancy loop")
             "residual": _fig_residual(res, os.path.join(out_dir, "loop_residual.png"))}
     if res.steps and res.steps[0].screens:
         figs["screen"] = _fig_screen(res, os.path.join(out_dir, "loop_screen.png"))
+    paper = _paper_variants(res)
+    if paper and any(o.quantity == "bulk_density" for o in res.fit_data.observations):
+        figs["coordination"] = _fig_coordination(res, paper, os.path.join(out_dir, "loop_coordination.png"))
     held = res.heldout_data
     L = [f"# {title}", "", f"**Verdict: {res.verdict}.**", "",
          f"Fit data: {len(res.fit_data)} numbers of {', '.join(c.label for c in res.fit_data.conditions)}; "
@@ -206,7 +246,11 @@ def write_report(res: LoopResult, out_dir: str, title: str = "Discrepancy loop")
     L += ["## What these data could reveal", ""]
     L += [f"- {p.statement}" for p in res.power.values()] or ["- (no candidate was screened)"]
     L += ["", "## Measured and simulated", "", f"![fit]({os.path.basename(figs['fit'])})", "",
-          f"![residuals]({os.path.basename(figs['residual'])})", "", "## Log", "", "```"]
+          f"![residuals]({os.path.basename(figs['residual'])})", ""]
+    if "coordination" in figs:
+        L += ["Relaxed pellets against the paper's Fig. 10 (its measured densities, the coordination numbers "
+              "of its fits):", "", f"![coordination]({os.path.basename(figs['coordination'])})", ""]
+    L += ["## Log", "", "```"]
     L += res.log + ["```", ""]
     path = os.path.join(out_dir, "report.md")
     with open(path, "w") as fh:

@@ -1,0 +1,45 @@
+"""The loop's report (pelletdem.loop_report): what it draws and writes."""
+from __future__ import annotations
+
+import dataclasses
+
+from toy_pellet import BOUNDS, START, TRUTH, toy
+
+from pelletdem.loop import Condition, FunctionSimulator, close_loop, synthetic_dataset
+
+
+def _with_coordination(params, c, seed=0):
+    # the toy pellet's coordination number grows with its density, as a relaxed pellet's does
+    p = toy(params, c, seed)
+    return dataclasses.replace(p, scalars={**p.scalars, "coordination_number": 12.0 * p.scalars["bulk_density"] / 560.0})
+
+
+def _loop(conditions, held):
+    sim = FunctionSimulator(_with_coordination)
+    data = synthetic_dataset(sim, TRUTH, conditions + held, noise=0.02, compaction_points=4,
+                             seeds=[1000 + k for k in range(5)], seed=0)
+    return close_loop(sim, data, BOUNDS, START, held_out=lambda c: c in held, max_effects=0)
+
+
+def test_data_of_the_paper_s_variants_get_its_fig_10_with_the_relaxed_pellets(tmp_path):
+    from pelletdem.loop_report import _paper_variants, write_report
+    from pelletdem.paper_tables import variants
+
+    fit = [Condition(60e6, 8, "oak"), Condition(120e6, 8, "oak")]
+    held = [Condition(120e6, 20, "oak")]
+    res = _loop(fit, held)
+    paper = _paper_variants(res)
+    oak = {(v.mc_percent, v.sigma_z): v for v in variants() if v.material == "oak"}
+    assert paper == {c: oak[(c.mc, c.sigma_z)] for c in fit + held}
+    text = open(write_report(res, str(tmp_path), "toy")).read()
+    assert (tmp_path / "loop_coordination.png").stat().st_size > 0
+    assert "![coordination](loop_coordination.png)" in text and "Fig. 10" in text
+
+
+def test_conditions_that_are_not_the_paper_s_get_no_fig_10(tmp_path):
+    from pelletdem.loop_report import _paper_variants, write_report
+
+    res = _loop([Condition(60e6), Condition(120e6)], [Condition(90e6)])  # no material: not the paper's
+    assert _paper_variants(res) == {}
+    text = open(write_report(res, str(tmp_path), "toy")).read()
+    assert not (tmp_path / "loop_coordination.png").exists() and "coordination" not in text
