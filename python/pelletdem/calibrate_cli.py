@@ -192,6 +192,7 @@ def _fit_user_data(args) -> int:
     from . import loop_cli
 
     ns = argparse.Namespace(out=args.out, data=args.data, synthetic=None, draw=0, noise=0.02, materials="oak",
+                            held_out=None, fit=[],
                             set=list(args.set), preset=args.preset,
                             packings=args.packings, max_effects=0, window=loop_cli.WINDOW,
                             workers=args.workers, dask=args.dask, cache=None)

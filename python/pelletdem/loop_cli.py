@@ -48,6 +48,12 @@ def add_parser(sub) -> None:
     p.add_argument("--draw", type=int, default=0, help="synthetic data: which replicate packings and noise (0..999)")
     p.add_argument("--noise", type=float, default=0.02, help="synthetic data: relative measurement noise")
     p.add_argument("--materials", default="oak", help="paper data: comma-separated materials")
+    p.add_argument("--held-out", default=None, metavar="KEY=V[,KEY=V]",
+                   help="paper data: the variants held out, by mc (%%), sigma_z (MPa) and material "
+                        "(default mc=20,sigma_z=60)")
+    p.add_argument("--fit", action="append", default=[], metavar="NAME=LO:HI",
+                   help="paper data: a base parameter fitted once for every variant besides the bonds per "
+                        "material (k1, p_y, r_b, tau_c or contact.X / bond.X; SI; repeatable)")
     p.add_argument("--set", action="append", default=[], metavar="LAW.NAME=VALUE",
                    help="a contact or bond law parameter of the model (repeatable)")
     p.add_argument("--preset", default=None, choices=["tiny", "quick", "paper"],
@@ -105,6 +111,16 @@ def _check(args) -> None:
     parse_settings(args.set)
     if args.synthetic is not None:
         synthetic_truth(args.synthetic)
+    if args.data != "paper" and (args.held_out is not None or args.fit):
+        raise ValueError("--held-out and --fit are for --data paper (a manifest says both itself)")
+    if args.data == "paper":
+        from .loop_paper import DEFAULT_HELD_OUT, paper_problem
+
+        paper_problem(_materials(args), args.held_out or DEFAULT_HELD_OUT, args.fit)
+
+
+def _materials(args) -> list:
+    return [m.strip() for m in args.materials.split(",") if m.strip()]
 
 
 def _problem(args):
@@ -123,11 +139,9 @@ def _problem(args):
         return (conds, truth), held, dict(SYNTHETIC_BOUNDS), None, BondLaw(**SYNTHETIC_BOND), settings, \
             args.preset or "tiny", subject
     if args.data == "paper":
-        mats = [m.strip() for m in args.materials.split(",") if m.strip()]
-        data = loop.Dataset.from_paper(materials=mats)
-        # E_b and sigma_c per material, shared by both pressures and moisture contents
-        bounds = {f"{p}[{m}]": b for m in mats for p, b in (("E_b", (1e8, 1e10)), ("sigma_c", (5e6, 5e8)))}
-        held = tuple(c for c in data.conditions if c.mc == 20 and c.sigma_z == 60e6)
+        from .loop_paper import DEFAULT_HELD_OUT, paper_problem
+
+        data, held, bounds = paper_problem(_materials(args), args.held_out or DEFAULT_HELD_OUT, args.fit)
         return data, held, bounds, None, BondLaw(), settings, args.preset or "tiny", \
             "the paper's measurements"
     from .loop_manifest import example_manifest, load_manifest
