@@ -164,6 +164,55 @@ def _fig_coordination(res: LoopResult, variants: Dict, path: str) -> str:
     return _save(plt, fig, path)
 
 
+def _by_quantity(res: LoopResult) -> str:
+    """chi2/n and RRMSE (eq. 16) of each quantity on fresh packings, fit and held-out data, the
+    baseline's beside the final model's, as a Markdown table."""
+    models = [res.baseline] + ([res.final] if res.chosen else [])
+    head = "| quantity | data | n | " + " | ".join(f"{m.name}: chi2/n | {m.name}: RRMSE" for m in models) + " |"
+    rows = [head, "|---|---|---|" + "---|---|" * len(models)]
+    for data, tag, z_of in ((res.fit_data, "fit", lambda m: m.z_check_fit),
+                            (res.heldout_data, "held out", lambda m: m.z_check_held)):
+        if data is None:
+            continue
+        quantity = np.array([o.quantity for o in data.observations])
+        values = np.array([o.value for o in data.observations])
+        for q in dict.fromkeys(quantity):
+            idx = np.flatnonzero(quantity == q)
+            cells = []
+            for m in models:
+                z = np.asarray(z_of(m), float)[idx]
+                rel = (_means(m, data)[idx] - values[idx]) / values[idx]
+                cells.append(f"{np.mean(z ** 2):.2f} | {math.sqrt(np.mean(rel ** 2)):.3f}")
+            rows.append(f"| {q} | {tag} | {len(idx)} | " + " | ".join(cells) + " |")
+    return "\n".join(rows)
+
+
+def _num(v: float, fmt: str) -> str:
+    return format(v, fmt) if math.isfinite(v) else "-"  # a simulator that does not report it
+
+
+def _relaxed(res: LoopResult) -> str:
+    """Each condition's relaxed pellet on fresh packings (bulk density, kg/m^3, and bulk
+    coordination number, the means over the check packings), measured density beside it, as
+    a Markdown table."""
+    models = [res.baseline] + ([res.final] if res.chosen else [])
+    measured = {}
+    for data in (res.fit_data, res.heldout_data):
+        for o in (data.observations if data is not None else ()):
+            if o.quantity == "bulk_density":
+                measured[o.condition] = o
+    conds = list(res.baseline.check)
+    rows = ["| condition | measured density | " + " | ".join(f"{m.name}: density | {m.name}: CN" for m in models) + " |",
+            "|---|---|" + "---|---|" * len(models)]
+    for c in conds:
+        o = measured.get(c)
+        cells = [f"{o.value:.0f} +- {o.sd:.0f}" if o is not None else "-"]
+        cells += [f"{_num(m.check[c].scalar('bulk_density'), '.0f')} | "
+                  f"{_num(m.check[c].scalar('coordination_number'), '.2f')}" for m in models]
+        rows.append(f"| {c.label} | " + " | ".join(cells) + " |")
+    return "\n".join(rows)
+
+
 def _params(mf: ModelFit) -> str:
     out = []
     for name in mf.space.names:
@@ -220,7 +269,8 @@ def write_report(res: LoopResult, out_dir: str, title: str = "Discrepancy loop")
          "## Error before and after", "", res.table(), "",
          "On packings no fit or design used. chi2/n: mean squared z-score, z the normal score of the "
          "difference between the model's mean over its packings and the measured mean, over both standard "
-         "errors; about 1 when the model is right. RRMSE: eq. 16.", ""]
+         "errors; about 1 when the model is right. RRMSE: eq. 16.", "", "By quantity:", "", _by_quantity(res), "",
+         "Relaxed pellets (means over the fresh packings; CN away from the free surfaces):", "", _relaxed(res), ""]
     for k, st in enumerate(res.steps):
         widen = st.model.fit.widen
         shared = (" The errors allow for the misfits of one condition's observations being correlated (they share "
