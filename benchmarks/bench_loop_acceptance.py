@@ -11,7 +11,10 @@ strength inside the reported 2-sigma interval), one at a strength the loop's pow
 says these data cannot reveal (nothing wrong may be named), the control ``none`` (nothing
 may be added),
 or a law change no candidate is (``bond.kt_ratio=0.2``, ``contact.rolling=0.1``, ten times the
-default, ``contact.mu=0.3``: at most one draw in five may name a library effect). Each draw
+default, ``contact.mu=0.3``: at most one draw in five may name a library effect). An effect
+that needs the moisture to vary (moisture_bonds) is hidden in data of two moisture contents,
+with its own control ``bond.moisture_coefficient=0`` (``pelletdem.loop_cli.synthetic_design``).
+Each draw
 takes other replicate packings and other measurement noise (the loop's own packings stay the
 same). Every loop's report stays in
 OUT/CASE/dD/; the relaxed pellets are shared between loops through OUT/cache. Prints and writes
@@ -29,12 +32,16 @@ import time
 HERE = os.path.dirname(os.path.abspath(__file__))
 #: Library effects at a moderate strength (their probe strengths), the control, and law
 #: changes no candidate is.
-EFFECT_CASES = ("plate_crushing", "hardening", "unloading_growth", "overlap_bond_radius")
+EFFECT_CASES = ("plate_crushing", "hardening", "unloading_growth", "saturating_unloading", "overlap_bond_radius",
+                "moisture_bonds")
 #: Effects at strengths the loop's own power statement says these data cannot reveal at the
 #: default size (a Weibull modulus above ~2.1, a softening below ~2.1): run to check that the
 #: statement holds (nothing wrong is named), not counted as effects to name.
 BELOW_POWER_CASES = ("weibull_strength=3", "bond_softening=1")
 CONTROL = "none"
+#: The control of the moisture design (moisture_bonds' data: two moisture contents), whose
+#: library holds moisture_bonds too: its coefficient at 0 hides nothing.
+MOISTURE_CONTROL = "bond.moisture_coefficient=0"
 OUTSIDE_CASES = ("bond.kt_ratio=0.2", "contact.rolling=0.1", "contact.mu=0.3")
 
 
@@ -105,7 +112,8 @@ def describe(case: str, out: dict) -> str:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--cases", nargs="*", default=[*EFFECT_CASES, CONTROL, *OUTSIDE_CASES, *BELOW_POWER_CASES])
+    ap.add_argument("--cases", nargs="*", default=[*EFFECT_CASES, CONTROL, MOISTURE_CONTROL, *OUTSIDE_CASES,
+                                                  *BELOW_POWER_CASES])
     ap.add_argument("--draws", type=int, default=5, help="draws per case (the control wants 10)")
     ap.add_argument("--first-draw", type=int, default=0)
     ap.add_argument("--workers", type=int, default=2)

@@ -8,8 +8,9 @@
 
 Synthetic data are made as a laboratory's: five replicate pellets per condition from packings
 the fits never use (--draw picks another five and another noise), 2 % measurement noise,
-diametral curves, compaction curves and densities at 60, 90 and 120 MPa, 90 MPa held out.
-Writes DIR/report.md with its figures and DIR/loop.json; DIR/cache keeps every simulation,
+diametral curves, compaction curves and densities at 60, 90 and 120 MPa, 90 MPa held out;
+where the hidden effect needs the moisture to vary (moisture_bonds, or bond.moisture_coefficient=0
+as its control), 60 and 120 MPa at MC 8 and 20 %, 60 MPa at 20 % held out. Writes DIR/report.md with its figures and DIR/loop.json; DIR/cache keeps every simulation,
 so a rerun resumes.
 """
 from __future__ import annotations
@@ -27,6 +28,9 @@ from .loop_synthetic import DATA_SEEDS
 SYNTHETIC_BOND = {"youngs_modulus": 60e6, "sigma_c": 9e6, "tau_c": 9e6}
 SYNTHETIC_BOUNDS = {"E_b": (2e7, 2e8), "sigma_c": (3e6, 3e7)}
 SYNTHETIC_PRESSURES = (60e6, 120e6, 90e6)
+#: (sigma_z Pa, MC %) of synthetic data whose hidden effect needs the moisture to vary, the
+#: last held out: the paper's design (two moisture contents at two pressures).
+SYNTHETIC_MOISTURE = ((60e6, 8.0), (120e6, 8.0), (120e6, 20.0), (60e6, 20.0))
 #: The diametral test window (dL/D) the loop starts with (synthetic data are made to it); it is
 #: then fitted to the data's reach, and widened when the fitted model does not fail inside.
 WINDOW = 0.25
@@ -94,6 +98,25 @@ def synthetic_truth(spec: str) -> dict:
                      "or contact.X=V / bond.X=V")
 
 
+def synthetic_design(truth: dict, draw: int):
+    """(conditions, held-out conditions, {condition: replicate packings}) of synthetic data
+    hiding ``truth`` in draw ``draw``: 60, 120 and 90 MPa (held out) at MC 8 %; where the
+    hidden law field belongs to an effect that needs the moisture to vary, 60 and 120 MPa at
+    8 and 20 % (60 MPa at 20 % held out), the wetter pellets pressed from other packings (a
+    laboratory's pellets of two moisture contents are other pellets)."""
+    from . import loop
+    from .effects import EFFECTS
+
+    wet = any(e.needs == "mc" and e.param in truth for e in EFFECTS.values())
+    if wet:
+        conds = [loop.Condition(p, mc) for p, mc in SYNTHETIC_MOISTURE]
+    else:
+        conds = [loop.Condition(p) for p in SYNTHETIC_PRESSURES]
+    offset = {mc: 500 * k for k, mc in enumerate(sorted({c.mc for c in conds}))}
+    seeds = {c: tuple(s + 10 * draw + offset[c.mc] for s in DATA_SEEDS) for c in conds}
+    return conds, (conds[-1],), seeds
+
+
 def _check(args) -> None:
     """ValueError naming the first bad argument, before any work."""
     from .law_settings import parse_settings
@@ -132,9 +155,8 @@ def _problem(args):
 
     settings = parse_settings(args.set)
     if args.synthetic is not None:
-        conds = [loop.Condition(s) for s in SYNTHETIC_PRESSURES]
-        held = (conds[-1],)
         truth = synthetic_truth(args.synthetic)
+        conds, held, _ = synthetic_design(truth, args.draw)
         subject = f"synthetic data ({'hidden: ' + args.synthetic if truth else 'control'})"
         return (conds, truth), held, dict(SYNTHETIC_BOUNDS), None, BondLaw(**SYNTHETIC_BOND), settings, \
             args.preset or "tiny", subject
@@ -190,7 +212,7 @@ def run(args, title: str = "Discrepancy loop on") -> int:
                                   cache_dir=cache, relaxed_dir=os.path.join(cache, "relaxed")) as sim:
             if isinstance(data, tuple):
                 conds, truth = data
-                seeds = tuple(s + 10 * args.draw for s in DATA_SEEDS)
+                seeds = synthetic_design(truth, args.draw)[2]
                 hidden = {"E_b": SYNTHETIC_BOND["youngs_modulus"], "sigma_c": SYNTHETIC_BOND["sigma_c"], **truth}
                 data = loop.synthetic_dataset(sim, hidden, conds, seeds=seeds, noise=args.noise,
                                               compaction_points=4, seed=args.draw)

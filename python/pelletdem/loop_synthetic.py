@@ -11,7 +11,7 @@ optionally, sigma_z along the compaction curve. Nothing in the dataset says what
 from __future__ import annotations
 
 import math
-from typing import Mapping, Sequence
+from typing import Dict, Mapping, Sequence, Tuple, Union
 
 import numpy as np
 
@@ -35,25 +35,57 @@ def _unfailed(ensembles) -> int:
     return sum(m.scalars.get("peaked", 1.0) < 1.0 for e in ensembles.values() if e.ok for m in e.members)
 
 
-def _tested_to_failure(sim: Simulator, truth: Mapping[str, float], conditions: Sequence[Condition],
-                       seeds: Sequence[int]):
-    """The replicates' ensembles, each test run until its pellet broke, as a laboratory runs
-    it: where a replicate has not failed by the end of the window and the simulator can
-    widen it, the window is widened (:func:`pelletdem.loop_simulators.next_window`) and the truth simulated
-    again; the simulator keeps the wider window."""
-    ensembles = sim.predict(dict(truth), list(conditions), seeds)
+def _predict(sim: Simulator, truth: Mapping[str, float], seeds: Mapping[Condition, Tuple[int, ...]]):
+    # conditions that share their replicate packings are simulated together
+    groups: Dict[Tuple[int, ...], list] = {}
+    for c, s in seeds.items():
+        groups.setdefault(s, []).append(c)
+    out = {}
+    for s, conds in groups.items():
+        out.update(sim.predict(dict(truth), conds, s))
+    return out
+
+
+def _tested_to_failure(sim: Simulator, truth: Mapping[str, float], seeds: Mapping[Condition, Tuple[int, ...]]):
+    """The replicates' ensembles (``seeds``: each condition's replicate packings), each test
+    run until its pellet broke, as a laboratory runs it: where a replicate has not failed by
+    the end of the window and the simulator can widen it, the window is widened
+    (:func:`pelletdem.loop_simulators.next_window`) and the truth simulated again; the
+    simulator keeps the wider window."""
+    ensembles = _predict(sim, truth, seeds)
     while _unfailed(ensembles) and next_window(sim) is not None:
         sim.widen(next_window(sim))
-        ensembles = sim.predict(dict(truth), list(conditions), seeds)
+        ensembles = _predict(sim, truth, seeds)
     return ensembles
 
 
+def _replicate_seeds(seeds, conditions: Sequence[Condition]) -> Dict[Condition, Tuple[int, ...]]:
+    """{condition: its replicate packings} from one sequence for all or a mapping."""
+    if isinstance(seeds, Mapping):
+        missing = [c.label for c in conditions if c not in seeds]
+        if missing:
+            raise ValueError(f"seeds: no replicate packings given for {', '.join(missing)}")
+        per = {c: seeds[c] for c in conditions}
+    else:
+        per = {c: seeds for c in conditions}
+    out = {}
+    for c, s in per.items():
+        s = tuple(int(k) for k in s)
+        if len(s) < 2:
+            raise ValueError(f"seeds = {s!r} ({c.label}): at least 2 replicate packings are needed for an SD")
+        out[c] = s
+    return out
+
+
 def synthetic_dataset(sim: Simulator, truth: Mapping[str, float], conditions: Sequence[Condition], *,
-                      seeds: Sequence[int] = DATA_SEEDS, noise: float = 0.02,
+                      seeds: Union[Sequence[int], Mapping[Condition, Sequence[int]]] = DATA_SEEDS,
+                      noise: float = 0.02,
                       quantities: Sequence[str] = ("sigma_1", "sigma_f", "dLf_D", "bulk_density"),
                       compaction_points: int = 0, seed: int = 0, name: str = "synthetic") -> Dataset:
     """Data of ``conditions`` made by ``sim`` under ``truth`` (SI; it may switch on any
-    effect, in the library or not): one replicate per packing of ``seeds`` (at least 2), each
+    effect, in the library or not): one replicate per packing of ``seeds`` (at least 2; one
+    sequence for every condition, or {condition: sequence} where each condition's pellets
+    must be other pellets, as a laboratory's are), each
     number of each replicate times (1 + ``noise`` N(0, 1)) (``seed`` seeds that noise), then
     the replicates' mean, SD and count per number. A replicate that has not failed by the end
     of the diametral window is tested further where the simulator can widen its window (to
@@ -62,14 +94,12 @@ def synthetic_dataset(sim: Simulator, truth: Mapping[str, float], conditions: Se
     the compaction curve's range to its end (0: none)."""
     if not (isinstance(noise, (int, float)) and 0 <= noise < 1):
         raise ValueError(f"noise = {noise!r} is out of range: allowed 0 <= noise < 1")
-    seeds = tuple(int(s) for s in seeds)
-    if len(seeds) < 2:
-        raise ValueError(f"seeds = {seeds!r}: at least 2 replicate packings are needed for an SD")
+    seeds = _replicate_seeds(seeds, conditions)
     bad = set(quantities) - {"sigma_1", "sigma_f", "dLf_D", "bulk_density"}
     if bad:
         raise ValueError(f"quantities {sorted(bad)}: allowed sigma_1, sigma_f, dLf_D, bulk_density")
     rng = np.random.default_rng(seed)
-    ensembles = _tested_to_failure(sim, truth, conditions, seeds)
+    ensembles = _tested_to_failure(sim, truth, seeds)
     obs = []
 
     def measured(values, x=float("nan"), quantity="sigma_f", part="scalar", cond=None):

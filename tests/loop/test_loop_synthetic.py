@@ -37,6 +37,39 @@ def test_bad_arguments_are_refused_before_any_simulation():
         synthetic_dataset(sim, TRUTH, FIT, seeds=[1])
     with pytest.raises(ValueError, match="quantities"):
         synthetic_dataset(sim, TRUTH, FIT, quantities=("porosity",))
+    with pytest.raises(ValueError, match="no replicate packings given for MC 8% 120 MPa"):
+        synthetic_dataset(sim, TRUTH, FIT, seeds={FIT[0]: (1000, 1001)})
+    with pytest.raises(ValueError, match="at least 2"):
+        synthetic_dataset(sim, TRUTH, FIT, seeds={FIT[0]: (1000, 1001), FIT[1]: (1002,)})
+
+
+def test_each_condition_can_have_its_own_replicate_packings():
+    seen = {}
+    sim = FunctionSimulator(lambda p, c, s: (seen.setdefault(c, set()).add(s), toy(p, c, s))[1])
+    seeds = {FIT[0]: (1000, 1001, 1002), FIT[1]: (1500, 1501, 1502)}
+    d = synthetic_dataset(sim, TRUTH, FIT, seeds=seeds, noise=0.0)
+    assert seen == {c: set(s) for c, s in seeds.items()}
+    assert all(o.n == 3 for o in d.observations)
+
+
+def test_a_moisture_effect_is_hidden_in_data_of_two_moisture_contents_from_other_pellets():
+    from pelletdem.effects import EFFECTS
+    from pelletdem.loop_cli import SYNTHETIC_MOISTURE, synthetic_design, synthetic_truth
+
+    conds, held, seeds = synthetic_design(synthetic_truth("moisture_bonds"), 2)
+    assert [(c.sigma_z, c.mc) for c in conds] == list(SYNTHETIC_MOISTURE) and held == (conds[-1],)
+    assert held[0].mc == 20.0 and held[0].sigma_z == 60e6
+    dry = [s for c, s in seeds.items() if c.mc == 8.0]
+    wet = [s for c, s in seeds.items() if c.mc == 20.0]
+    assert dry[0] == tuple(s + 20 for s in DATA_SEEDS) and not set(dry[0]) & set(wet[0])
+    assert not (set(wet[0]) | set(dry[0])) & (set(FIT_SEEDS) | set(CHECK_SEEDS))
+    # the same design for its control (the coefficient at 0)
+    assert synthetic_design(synthetic_truth("bond.moisture_coefficient=0"), 2)[0] == conds
+    # every other effect: three pressures at MC 8 %, the replicates those of before
+    for name in set(EFFECTS) - {"moisture_bonds"}:
+        c, h, s = synthetic_design(synthetic_truth(name), 1)
+        assert [x.sigma_z for x in c] == [60e6, 120e6, 90e6] and {x.mc for x in c} == {8.0}
+        assert h == (c[-1],) and set(s.values()) == {tuple(k + 10 for k in DATA_SEEDS)}
 
 
 class _Window(FunctionSimulator):
