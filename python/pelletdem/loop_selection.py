@@ -54,13 +54,13 @@ from .effects import EFFECTS, Effect, clash
 from .loop_box import pinned, pinned_list, pinned_note, rebox, widened
 from .loop_data import Condition, Dataset
 from .loop_emulator import Axis, Space
-from .loop_models import ModelFit, chi2_of, fit_model, nested_points
+from .loop_models import ModelFit, chi2_of, ensemble_z, fit_model, nested_points
 from .loop_screen import Power, Screen, detection_power, screen
 from .loop_simulators import MAX_WINDOW, Ensemble, Simulator, next_window
 from .residuals import DEFAULT_ALPHA, ResidualSummary, describe
 
 __all__ = ["FIT_SEEDS", "CHECK_SEEDS", "MAX_WINDOW", "unfailed", "Trial", "Step", "LoopResult", "close_loop",
-           "describe_residual", "Gates", "judge", "pick", "rrmse_rise_se"]
+           "describe_residual", "Gates", "judge", "pick", "rrmse_rise_se", "check_chi2_se"]
 
 #: Times the baseline's box is widened where its fit is pinned at an end (pelletdem.loop_box).
 MAX_WIDEN = 2
@@ -237,20 +237,38 @@ def _without(check: Mapping[Condition, Ensemble], j: int) -> Dict[Condition, Ens
     return {c: Ensemble(e.seeds[:j] + e.seeds[j + 1:], e.members[:j] + e.members[j + 1:]) for c, e in check.items()}
 
 
-def rrmse_rise_se(before: ModelFit, after: ModelFit, fit_data: Dataset, heldout: Optional[Dataset]) -> float:
-    """Standard error of the rise of the check seeds' RRMSE from ``before`` to ``after`` (both
-    checked on the same packings): the jackknife over those packings, leaving each out of both
-    models' means in turn. The rise's scatter between packings, not the data's noise, which
-    the two models share. 0 with fewer than three packings (no tolerance)."""
+def _jackknife_se(before: ModelFit, after: ModelFit, stat: Callable[[Mapping[Condition, Ensemble]], float]) -> float:
+    """Standard error of stat(after) - stat(before) over the check packings: the jackknife,
+    leaving each packing out of both models' means in turn. It measures the packings' part of
+    the difference, not the data's noise, which the two models share; where both models have
+    the same pellets (an effect of the diametral test) their packings' scatter cancels in
+    part, where a compaction effect made new pellets it does not. 0 with fewer than three
+    packings (no tolerance)."""
     k = min(len(e.members) for e in (*before.check.values(), *after.check.values()))
     if k < 3:
         return 0.0
-    d = np.array([_rrmse_all(_without(after.check, j), fit_data, heldout)
-                  - _rrmse_all(_without(before.check, j), fit_data, heldout) for j in range(k)])
+    d = np.array([stat(_without(after.check, j)) - stat(_without(before.check, j)) for j in range(k)])
     d = d[np.isfinite(d)]
     if len(d) < 3:
         return 0.0
     return float(math.sqrt((len(d) - 1) / len(d) * np.sum((d - d.mean()) ** 2)))
+
+
+def rrmse_rise_se(before: ModelFit, after: ModelFit, fit_data: Dataset, heldout: Optional[Dataset]) -> float:
+    """Standard error (-) of the rise of the check packings' RRMSE (eq. 16, all the data) from
+    ``before`` to ``after`` (both checked on the same packing seeds): :func:`_jackknife_se`."""
+    return _jackknife_se(before, after, lambda check: _rrmse_all(check, fit_data, heldout))
+
+
+def check_chi2_se(before: ModelFit, after: ModelFit, fit_data: Dataset, heldout: Optional[Dataset]) -> float:
+    """Standard error (-) of the change of the check packings' chi2 (all the data) from
+    ``before`` to ``after``: :func:`_jackknife_se`. A compaction effect checked on new pellets
+    can lower that chi2 by luck of the packings; this says by how much."""
+    def chi2(check):
+        held = chi2_of(ensemble_z(check, heldout)) if heldout is not None else 0.0
+        return chi2_of(ensemble_z(check, fit_data)) + held
+
+    return _jackknife_se(before, after, chi2)
 
 
 def _check_chi2(mf: ModelFit) -> float:
@@ -276,14 +294,16 @@ class Gates:
 
 
 def judge(g: Gates, drop: float, before: Tuple[float, float, float],
-          after: Tuple[float, float, float], rrmse_se: float = 0.0) -> Tuple[bool, str]:
+          after: Tuple[float, float, float], rrmse_se: float = 0.0, chi2_se: float = 0.0) -> Tuple[bool, str]:
     """Whether a candidate is accepted, and why.
 
     ``drop``: the fall of its fit chi2; ``before`` / ``after``: (chi2 of all data, chi2 of the
     held-out data, RRMSE of all data) on the check packings, for the model without and with the
-    candidate; ``rrmse_se``: the standard error of the RRMSE's rise (:func:`rrmse_rise_se`).
+    candidate; ``rrmse_se``: the standard error of the RRMSE's rise (:func:`rrmse_rise_se`);
+    ``chi2_se``: that of the fresh packings' chi2 (:func:`check_chi2_se`).
     The gates, in order: the fit test; a real fall of chi2 on fresh packings (a lucky packing
-    cannot pass it); no rise of the held-out chi2 beyond its own scatter; no rise of the
+    cannot pass it), by a quarter of the model's excess there and by more than twice its
+    scatter between packings (new pellets cannot pass it by luck); no rise of the held-out chi2 beyond its own scatter; no rise of the
     RRMSE (eq. 16) beyond twice its scatter between packings, which a candidate fitting the
     most precise observations at the others' cost would show.
     """
@@ -293,6 +313,9 @@ def judge(g: Gates, drop: float, before: Tuple[float, float, float],
         return False, f"fit chi2 fell by {drop:.1f}, below the threshold {g.threshold:.1f}"
     if base_before - base_after < need:
         return False, f"chi2 on fresh packings {base_before:.1f} -> {base_after:.1f}: it needed to fall by {need:.1f}"
+    if base_before - base_after <= 2.0 * chi2_se:
+        return False, (f"chi2 on fresh packings {base_before:.1f} -> {base_after:.1f}, a fall within twice its scatter "
+                       f"between packings ({chi2_se:.1f}): other pellets, not the effect, may have made it")
     if g.n_held and held_after - held_before > 2.0 * math.sqrt(2.0 * g.n_held):
         return False, (f"the held-out chi2 rose {held_before:.1f} -> {held_after:.1f} on fresh packings: "
                        "it does not carry over to the held-out conditions")
@@ -301,7 +324,7 @@ def judge(g: Gates, drop: float, before: Tuple[float, float, float],
                        f"its scatter between packings ({rrmse_se:.3f}): its chi2 fell by fitting the most precise "
                        "observations at the others' cost")
     return True, (f"fit chi2 -{drop:.1f} (threshold {g.threshold:.1f}); chi2 on fresh packings "
-                  f"{base_before:.1f} -> {base_after:.1f}"
+                  f"{base_before:.1f} -> {base_after:.1f} (its fall's scatter {chi2_se:.1f})"
                   + (f" (held out {held_before:.1f} -> {held_after:.1f})" if g.n_held else "")
                   + f"; RRMSE {rrmse_before:.3f} -> {rrmse_after:.3f} (its rise's scatter {rrmse_se:.3f})")
 
@@ -475,7 +498,8 @@ def close_loop(sim: Simulator, data: Dataset, base_bounds: Mapping[str, Sequence
             rrmse_after = _check_rrmse(cand, fit_data, heldout)
             ok, why = judge(Gates(threshold, n_check, n_held, min_check_gain), drop,
                             (base_before, held_before, rrmse_before), (after, held_after, rrmse_after),
-                            rrmse_rise_se(model, cand, fit_data, heldout))
+                            rrmse_rise_se(model, cand, fit_data, heldout),
+                            check_chi2_se(model, cand, fit_data, heldout))
             trials.append(Trial(e, cand, drop, base_before, after, ok, why))
             errors[cand.name] = _errors(cand, fit_data, heldout)
             say(f"{e.name}: {'accepted' if ok else 'not accepted'}: {why}")

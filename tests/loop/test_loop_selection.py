@@ -277,6 +277,11 @@ def test_each_gate_refuses_on_its_own():
     assert judge(g, 25.0, before, (60.0, 20.0, 0.159), rrmse_se=0.005)[0]
     ok, why = judge(g, 25.0, before, (60.0, 20.0, 0.161), rrmse_se=0.005)
     assert not ok and "twice its scatter between packings (0.005)" in why
+    # fresh packings' scatter: a fall of 60 is refused where twice its scatter is 60, not below
+    ok, why = judge(g, 25.0, before, good, chi2_se=30.0)
+    assert not ok and "within twice its scatter between packings (30.0)" in why
+    ok, why = judge(g, 25.0, before, good, chi2_se=29.9)
+    assert ok and "120.0 -> 60.0 (its fall's scatter 29.9)" in why
     # without held-out conditions the held-out gate does not apply
     g0 = Gates(threshold=10.0, n_check=27, n_held=0, min_check_gain=0.25)
     ok, why = judge(g0, 25.0, (120.0, 0.0, 0.15), (60.0, 0.0, 0.08))
@@ -354,3 +359,36 @@ def test_the_rrmse_rise_scatter_of_one_observation_is_the_standard_error_of_a_me
     assert rrmse_rise_se(model(a), model(b), data, None) == pytest.approx(expected, rel=1e-12)
     # a rise common to every packing has no scatter: the data's noise is shared by both models
     assert rrmse_rise_se(model(a), model(a + 0.2e6), data, None) == pytest.approx(0.0, abs=1e-12)
+
+
+def test_new_pellets_make_the_fresh_chi2_scatter_more_than_the_same_pellets_do():
+    """The jackknife of the fresh packings' chi2: an effect of the diametral test keeps the
+    baseline's pellets and its change scatters little between packings; a compaction effect
+    of the same size on the data makes new pellets (the toy re-draws its packings, as the DEM
+    does), and its change scatters with them."""
+    from types import SimpleNamespace
+
+    from pelletdem.loop_models import chi2_of, ensemble_z
+    from pelletdem.loop_selection import _without, check_chi2_se
+
+    sim = FunctionSimulator(toy)
+    data = synthetic_dataset(sim, TRUTH, FIT + HELD, noise=0.02, compaction_points=4,
+                             seeds=[1000 + k for k in range(5)], seed=0)
+    fit_data, held = data.split(lambda c: c in HELD)
+    seeds = tuple(100 + k for k in range(6))
+
+    def model(extra):
+        return SimpleNamespace(check=sim.predict({**TRUTH, **extra}, FIT + HELD, seeds))
+
+    base = model({})
+    same = model(LIBRARY["toe"].settings(0.05))
+    new = model(LIBRARY["springback"].settings(0.1))
+    assert check_chi2_se(base, base, fit_data, held) == 0.0
+    paired, unpaired = check_chi2_se(base, same, fit_data, held), check_chi2_se(base, new, fit_data, held)
+    assert 0 < paired < unpaired / 3, (paired, unpaired)
+
+    def chi2(check):
+        return chi2_of(ensemble_z(check, fit_data)) + chi2_of(ensemble_z(check, held))
+
+    d = np.array([chi2(_without(new.check, j)) - chi2(_without(base.check, j)) for j in range(6)])
+    assert unpaired == pytest.approx(math.sqrt(5 / 6 * np.sum((d - d.mean()) ** 2)), rel=1e-12)
