@@ -288,7 +288,8 @@ def write_report(res: LoopResult, out_dir: str, title: str = "Discrepancy loop")
                   f"{_params(t.model)}."]
         if st.rivals:
             L += ["", f"- {st.added} and {' and '.join(st.rivals)} fit as well (on fresh packings their chi2 within 2 "
-                  "of each other, their BIC difference, or the emulated fit preferring the other): these data do not "
+                  "of each other, their BIC difference, or within twice the scatter of that difference between the "
+                  "packings, or the emulated fit preferring the other): these data do not "
                   f"tell them apart; {st.added} was added for the lower chi2 on fresh packings."]
         L.append("")
     if "screen" in figs:

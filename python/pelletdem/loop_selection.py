@@ -329,20 +329,27 @@ def judge(g: Gates, drop: float, before: Tuple[float, float, float],
                   + f"; RRMSE {rrmse_before:.3f} -> {rrmse_after:.3f} (its rise's scatter {rrmse_se:.3f})")
 
 
-def pick(accepted: Sequence[Trial]) -> Tuple[Optional[Trial], List[str]]:
+def pick(accepted: Sequence[Trial], scatter: Optional[Callable[[ModelFit, ModelFit], float]] = None
+         ) -> Tuple[Optional[Trial], List[str]]:
     """The accepted candidate to add and the names of its rivals.
 
     The one with the lowest chi2 on fresh packings is added: those are real simulations the
     fit never saw, where the emulated fit chi2 is in-sample and can favour a surface that bent
     to the fit packings' scatter. A rival is another accepted candidate within
-    :data:`TIE_CHI2` of it there, or one the emulated fit preferred: the two measures then
-    disagree, and the data do not tell the two apart.
+    :data:`TIE_CHI2` of it there, or within twice the scatter of the two models' difference
+    between the check packings (``scatter(a, b)``, e.g. :func:`check_chi2_se`: two compaction
+    effects are checked on different pellets), or one the emulated fit preferred: the two
+    measures then disagree, and the data do not tell the two apart.
     """
     if not accepted:
         return None, []
     added = min(accepted, key=lambda t: t.check_after)
+
+    def tie(t: Trial) -> float:
+        return max(TIE_CHI2, 2.0 * scatter(added.model, t.model)) if scatter is not None else TIE_CHI2
+
     return added, [t.effect.name for t in accepted if t is not added
-                   and (t.check_after - added.check_after < TIE_CHI2 or t.delta_chi2 > added.delta_chi2)]
+                   and (t.check_after - added.check_after < tie(t) or t.delta_chi2 > added.delta_chi2)]
 
 
 def close_loop(sim: Simulator, data: Dataset, base_bounds: Mapping[str, Sequence[float]],
@@ -503,7 +510,8 @@ def close_loop(sim: Simulator, data: Dataset, base_bounds: Mapping[str, Sequence
             trials.append(Trial(e, cand, drop, base_before, after, ok, why))
             errors[cand.name] = _errors(cand, fit_data, heldout)
             say(f"{e.name}: {'accepted' if ok else 'not accepted'}: {why}")
-        added, rivals = pick([t for t in trials if t.accepted])
+        added, rivals = pick([t for t in trials if t.accepted],
+                             lambda a, b: check_chi2_se(a, b, fit_data, heldout))
         steps.append(Step(model, residual, screens, trials, added.effect.name if added else None, threshold,
                           rivals=rivals, powers=round_powers))
         if added is None:

@@ -308,6 +308,11 @@ def test_the_candidate_added_is_the_best_on_fresh_packings():
     added, rivals = pick([trial("hardening", 30.0, 23.9), trial("unloading_growth", 40.0, 22.3)])
     assert added.effect.name == "unloading_growth" and rivals == ["hardening"]
     assert pick([]) == (None, [])
+    # better on both by 3.8, but the two models' difference scatters by 2 between packings
+    # (each checked on its own pellets): within twice that, a rival; with 1.8, not
+    better = [trial("saturating_unloading", 30.0, 26.1), trial("unloading_growth", 40.0, 22.3)]
+    assert pick(better, lambda a, b: 2.0)[1] == ["saturating_unloading"]
+    assert pick(better, lambda a, b: 1.8)[1] == []
 
 
 def test_the_rrmse_rise_scatter_is_a_jackknife_over_the_check_packings():
