@@ -26,7 +26,10 @@ procedure is forward selection:
    design nor in the fit (the *check seeds*), the chi2 of all the data (fit and held-out
    conditions) falls by at least 4 and by ``min_check_gain`` of the model's excess over the
    number of points, where that chi2 was above what noise gives (n + 2 sqrt(2 n)): a model
-   already at the noise level on fresh packings has nothing there to gain; and the held-out
+   already at the noise level on fresh packings has nothing there to gain; that fall exceeds
+   twice its scatter between the check packings (a jackknife over them: a compaction effect is
+   checked on pellets compacted again, whose luck does not cancel as the same pellets' does);
+   and the held-out
    conditions' chi2 does not rise by more than its noise (2 sqrt(2 n_held)), and the RRMSE
    (eq. 16) of all the data on those packings does not rise by more than twice its scatter
    between them (a jackknife over the packings; a chi2 can fall by fitting
@@ -34,7 +37,8 @@ procedure is forward selection:
    packings are what a lucky packing cannot pass: an effect acting during compaction
    re-packs the pellet at every strength, and the fit may pick the strength whose packing
    happens to match; the check's packings are new at every strength alike. The best accepted
-   candidate (lowest chi2 on the check seeds) is added, even if what remains is still structured, and the
+   candidate (lowest chi2 on the check seeds) is added, even if what remains is still
+   structured, with the others it cannot be told from named beside it (:func:`pick`), and the
    loop goes back to 3 with the rest, up to ``max_effects``.
 6. **Report** every step: residual, screening, full fits, the effect added and why the others
    were not, errors before and after on fit and held-out data, and what the data could have
@@ -303,9 +307,10 @@ def judge(g: Gates, drop: float, before: Tuple[float, float, float],
     ``chi2_se``: that of the fresh packings' chi2 (:func:`check_chi2_se`).
     The gates, in order: the fit test; a real fall of chi2 on fresh packings (a lucky packing
     cannot pass it), by a quarter of the model's excess there and by more than twice its
-    scatter between packings (new pellets cannot pass it by luck); no rise of the held-out chi2 beyond its own scatter; no rise of the
-    RRMSE (eq. 16) beyond twice its scatter between packings, which a candidate fitting the
-    most precise observations at the others' cost would show.
+    scatter between packings (new pellets cannot pass it by luck); no rise of the held-out
+    chi2 beyond its own scatter; no rise of the RRMSE (eq. 16) beyond twice its scatter
+    between packings, which a candidate fitting the most precise observations at the others'
+    cost would show.
     """
     (base_before, held_before, rrmse_before), (base_after, held_after, rrmse_after) = before, after
     need = max(4.0, g.min_check_gain * (base_before - g.n_check))
