@@ -9,9 +9,10 @@
 Synthetic data are made as a laboratory's: five replicate pellets per condition from packings
 the fits never use (--draw picks another five and another noise), 2 % measurement noise,
 diametral curves, compaction curves and densities at 60, 90 and 120 MPa, 90 MPa held out;
-where the hidden effect needs the moisture to vary (moisture_bonds, or bond.moisture_coefficient=0
-as its control), 60 and 120 MPa at MC 8 and 20 %, 60 MPa at 20 % held out. Writes DIR/report.md with its figures and DIR/loop.json; DIR/cache keeps every simulation,
-so a rerun resumes.
+where the hidden effect needs the moisture to vary (moisture_bonds, or
+bond.moisture_coefficient=0 as its control), 60 and 120 MPa at MC 8 and 20 %, 60 MPa at 20 %
+held out. Writes DIR/report.md with its figures and DIR/loop.json; DIR/cache keeps every
+simulation, so a rerun resumes.
 """
 from __future__ import annotations
 
@@ -149,7 +150,6 @@ def _materials(args) -> list:
 def _problem(args):
     """(dataset, held_out, bounds, start, bond, settings, preset, subject) of the run; subject:
     what the data are, for the report's title."""
-    from . import loop
     from .engine import BondLaw
     from .law_settings import parse_settings
 

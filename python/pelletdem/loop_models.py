@@ -10,6 +10,7 @@ loops (the same box, conditions and seeds) is simulated once.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from typing import Callable, Dict, List, Optional, Sequence, Tuple
@@ -24,7 +25,7 @@ from .loop_simulators import Ensemble, Simulator
 
 __all__ = ["ModelFit", "REFINE_ROUNDS", "design_size", "relaxing_axes", "share_relaxations", "simulate_design",
            "local_design", "fit_model",
-           "nested_points", "ensemble_z", "emulator_correlation", "chi2_of"]
+           "nested_points", "ensemble_z", "emulator_correlation", "chi2_of", "with_more_check_packings"]
 
 
 #: Rounds of refinement of each model's emulator around its fit (at most).
@@ -235,6 +236,18 @@ def fit_model(sim: Simulator, space: Space, effects: Sequence[str], fit_data: Da
         + f"; fresh packings: chi2/n {chi2_of(mf.z_check_fit) / len(fit_data):.2f} fit"
         + (f", {chi2_of(z_held) / len(heldout):.2f} held out" if heldout is not None else ""))
     return mf
+
+
+def with_more_check_packings(sim: Simulator, mf: ModelFit, seeds: Sequence[int], fit_data: Dataset,
+                             heldout: Optional[Dataset]) -> ModelFit:
+    """``mf`` checked on its check packings and ``seeds`` (more packings no fit used): its
+    fitted parameters simulated there, the check ensembles and their z-scores extended."""
+    conds = list(mf.check)
+    more = sim.predict(mf.fit.params, conds, tuple(seeds))
+    check = {c: Ensemble(tuple(mf.check[c].seeds) + tuple(more[c].seeds),
+                         tuple(mf.check[c].members) + tuple(more[c].members)) for c in conds}
+    return dataclasses.replace(mf, check=check, z_check_fit=ensemble_z(check, fit_data),
+                               z_check_held=ensemble_z(check, heldout) if heldout is not None else None)
 
 
 def _median_within(noise: PackingNoise) -> float:

@@ -202,8 +202,8 @@ def _relaxed(res: LoopResult) -> str:
             if o.quantity == "bulk_density":
                 measured[o.condition] = o
     conds = list(res.baseline.check)
-    rows = ["| condition | measured density | " + " | ".join(f"{m.name}: density | {m.name}: CN" for m in models) + " |",
-            "|---|---|" + "---|---|" * len(models)]
+    head = " | ".join(f"{m.name}: density | {m.name}: CN" for m in models)
+    rows = [f"| condition | measured density | {head} |", "|---|---|" + "---|---|" * len(models)]
     for c in conds:
         o = measured.get(c)
         cells = [f"{o.value:.0f} +- {o.sd:.0f}" if o is not None else "-"]

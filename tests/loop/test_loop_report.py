@@ -12,7 +12,8 @@ from pelletdem.loop import Condition, FunctionSimulator, close_loop, synthetic_d
 def _with_coordination(params, c, seed=0):
     # the toy pellet's coordination number grows with its density, as a relaxed pellet's does
     p = toy(params, c, seed)
-    return dataclasses.replace(p, scalars={**p.scalars, "coordination_number": 12.0 * p.scalars["bulk_density"] / 560.0})
+    cn = 12.0 * p.scalars["bulk_density"] / 560.0
+    return dataclasses.replace(p, scalars={**p.scalars, "coordination_number": cn})
 
 
 @functools.lru_cache(maxsize=None)
