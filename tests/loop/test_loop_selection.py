@@ -397,3 +397,36 @@ def test_new_pellets_make_the_fresh_chi2_scatter_more_than_the_same_pellets_do()
 
     d = np.array([chi2(_without(new.check, j)) - chi2(_without(base.check, j)) for j in range(6)])
     assert unpaired == pytest.approx(math.sqrt(5 / 6 * np.sum((d - d.mean()) ** 2)), rel=1e-12)
+
+
+def test_an_inconclusive_check_is_extended_to_as_many_packings_again():
+    """The extra packings follow the check packings and skip any fit or check packing; the
+    model checked on them keeps its first packings' predictions and adds the new ones."""
+    import dataclasses
+    from types import SimpleNamespace
+
+    from pelletdem.loop_models import ensemble_z, with_more_check_packings
+    from pelletdem.loop_selection import _more_check_seeds
+
+    @dataclasses.dataclass
+    class Fitted:  # the fields of a ModelFit that with_more_check_packings reads and replaces
+        check: dict
+        fit: object
+        z_check_fit: object = None
+        z_check_held: object = None
+
+    assert _more_check_seeds((0, 1, 2, 3), (100, 101, 102, 103)) == (104, 105, 106, 107)
+    assert _more_check_seeds((5, 7), (4, 6)) == (8, 9)
+    sim = FunctionSimulator(toy)
+    data = synthetic_dataset(sim, TRUTH, FIT + HELD, noise=0.02, compaction_points=4,
+                             seeds=[1000 + k for k in range(5)], seed=0)
+    fit_data, held = data.split(lambda c: c in HELD)
+    first = Fitted(sim.predict(TRUTH, FIT + HELD, (100, 101, 102, 103)), SimpleNamespace(params=dict(TRUTH)))
+    more = with_more_check_packings(sim, first, (104, 105, 106, 107), fit_data, held)
+    whole = sim.predict(TRUTH, FIT + HELD, tuple(range(100, 108)))
+    o = fit_data.observations[0]
+    for c in FIT + HELD:
+        assert more.check[c].seeds == tuple(range(100, 108))
+        assert np.array_equal(more.check[c].values(o), whole[c].values(o))
+    np.testing.assert_array_equal(more.z_check_fit, ensemble_z(whole, fit_data))
+    np.testing.assert_array_equal(more.z_check_held, ensemble_z(whole, held))
