@@ -118,6 +118,10 @@ def test_other_python_threads_run_while_the_engine_steps():
     running during the chunks, not only between them."""
     w = settling_bed()
     w.run(200)
+    # about 0.8 s of stepping whatever the machine's speed (20,000 steps took 0.28 s on one)
+    t_cal = time.perf_counter()
+    w.run(2000)
+    steps = max(20000, int(0.8 * 2000 / (time.perf_counter() - t_cal)))
     ticks, stop = [], threading.Event()
 
     def busy():
@@ -131,7 +135,7 @@ def test_other_python_threads_run_while_the_engine_steps():
     t = threading.Thread(target=busy, daemon=True)
     t.start()
     t0 = time.perf_counter()
-    w.run_until(max_steps=LONG, time=w.time + 20000 * w.dt,
+    w.run_until(max_steps=LONG, time=w.time + steps * w.dt,
                 progress=lambda done: bounds.append(time.perf_counter()))
     run_s = time.perf_counter() - t0
     stop.set()
