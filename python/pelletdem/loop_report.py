@@ -176,13 +176,13 @@ def _by_quantity(res: LoopResult) -> str:
             continue
         quantity = np.array([o.quantity for o in data.observations])
         values = np.array([o.value for o in data.observations])
+        rel = {m.name: (_means(m, data) - values) / values for m in models}
         for q in dict.fromkeys(quantity):
             idx = np.flatnonzero(quantity == q)
             cells = []
             for m in models:
                 z = np.asarray(z_of(m), float)[idx]
-                rel = (_means(m, data)[idx] - values[idx]) / values[idx]
-                cells.append(f"{np.mean(z ** 2):.2f} | {math.sqrt(np.mean(rel ** 2)):.3f}")
+                cells.append(f"{np.mean(z ** 2):.2f} | {math.sqrt(np.mean(rel[m.name][idx] ** 2)):.3f}")
             rows.append(f"| {q} | {tag} | {len(idx)} | " + " | ".join(cells) + " |")
     return "\n".join(rows)
 
