@@ -27,9 +27,10 @@ HEAVY = dict(density=1e8, density_scale=1e12)
 BOX = ((-0.01, -0.01, -0.01), (0.01, 0.01, 0.01))
 
 
-def heavy_pair(r1=R1, r2=R2, gap=GAP, law=None, dt=2e-6):
-    """Two heavy spheres on the x axis, gap `gap` apart, bonded with `law`."""
-    w = pd.World(dt=dt, gravity=(0, 0, 0), box=BOX, skin=5e-5, **HEAVY)
+def heavy_pair(r1=R1, r2=R2, gap=GAP, law=None, dt=2e-6, contact=None):
+    """Two heavy spheres on the x axis, gap `gap` apart, bonded with `law` (the world's contact
+    law `contact`, default ContactLaw())."""
+    w = pd.World(dt=dt, gravity=(0, 0, 0), box=BOX, skin=5e-5, contact=contact, **HEAVY)
     w.add_particles(np.array([[0.0, 0, 0], [r1 + r2 + gap, 0, 0]]), np.array([r1, r2]))
     law = law or pd.BondLaw(gap_tolerance=2 * gap)
     assert w.create_bonds(law.to_core()) == 1

@@ -123,15 +123,19 @@ def test_cache_key_is_sensitive_to_every_input(monkeypatch):
         "preset": C.make_spec({"E_b": 30e6, "sigma_c": 9e6}, preset="quick", **base),
         "kind": C.make_spec({}, diametral=False, **base),
         "gap": C.make_spec({"E_b": 30e6, "sigma_c": 9e6}, bond=BondLaw(gap_tolerance=1e-6), **base),
+        "mc": C.make_spec({"E_b": 30e6, "sigma_c": 9e6}, contact={"moisture_content": 20.0}, **base),
+        "mc+yield": C.make_spec({"E_b": 30e6, "sigma_c": 9e6},
+                                contact={"moisture_content": 20.0, "moisture_yield": 0.03}, **base),
     }
     keys = {name: s.key for name, s in variants.items()}
     assert ref.key not in keys.values()
     assert len(set(keys.values())) == len(keys)
     # the relaxed pellet does not depend on the bond law or the diametral test's settings ...
-    for name in ("E_b", "sigma_c", "tau_c", "r_b", "max_dLD", "break_drop", "kind", "gap"):
+    # nor on the moisture content where no effect reads it during compaction ...
+    for name in ("E_b", "sigma_c", "tau_c", "r_b", "max_dLD", "break_drop", "kind", "gap", "mc"):
         assert variants[name].relax_key == ref.relax_key, name
     # ... but does on the contact law, the pressure, the seed and the preset
-    for name in ("k1", "contact.mu", "sigma_z", "seed", "preset"):
+    for name in ("k1", "contact.mu", "sigma_z", "seed", "preset", "mc+yield"):
         assert variants[name].relax_key != ref.relax_key, name
     # the package version and the engine build are part of the key
     ref_key = ref.key

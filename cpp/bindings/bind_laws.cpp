@@ -49,6 +49,7 @@ void bind_laws(py::module_& m) {
         .def("restitution", &ContactLawParams::restitution)
         .def("validate", &ContactLawParams::validate)
         .def("plain_pairs", &ContactLawParams::plain_pairs)
+        .def("moisture_acts", &ContactLawParams::moisture_acts)
         .def_static("rows", &ContactLawParams::rows);
   }
   {

@@ -14,8 +14,11 @@ long World::intact_bond_count() const {
   return c;
 }
 
-long World::create_bonds(const BondParams& bp) {
-  bp.validate();
+long World::create_bonds(const BondParams& law) {
+  law.validate();
+  BondParams bp = law;
+  bp.moisture_content = params_.contact.moisture_content;
+  bp.moisture_reference = params_.contact.moisture_reference;
   require(bp.gap_tolerance <= effective_skin(),
           cat("bond gap_tolerance = ", bp.gap_tolerance, " m must not exceed the neighbour skin ",
               effective_skin(), " m (raise skin)"));

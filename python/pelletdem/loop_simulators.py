@@ -225,7 +225,8 @@ class EngineSimulator(Simulator):
     ``cache_dir``: run cache directory (resumable); ``relaxed_dir``: relaxed-pellet
     checkpoints. Parameters: base names of :data:`pelletdem.calibrate.PARAMETERS`, optionally
     per material as ``name[material]``, and any ``contact.<field>`` / ``bond.<field>``. The
-    condition's moisture content is passed to the bond law (``bond.moisture_content``).
+    condition's moisture content is the contact law's (``contact.moisture_content``), which the
+    bonds take too.
     """
 
     def __init__(self, preset="tiny", *, bond=None, contact: Optional[Mapping[str, float]] = None,
@@ -281,6 +282,10 @@ class EngineSimulator(Simulator):
                     base[root] = v
             else:
                 base[name] = v
+        if "moisture_content" in contact:
+            raise ValueError("contact.moisture_content is set by each condition's moisture content (mc): "
+                             "do not set or fit it")
+        contact["moisture_content"] = float(cond.mc)
         for alias, fld in _ALIASES:
             if alias in base and fld in (contact if fld in ("k1",) else bond):
                 raise ValueError(f"{alias} and {'contact' if fld == 'k1' else 'bond'}.{fld} both set: give one")
@@ -288,7 +293,7 @@ class EngineSimulator(Simulator):
                          contact=contact, max_dLD=self.setup.max_dLD)
         check_names(bond, {f.name: f for f in dataclasses.fields(BondLaw)}, "bond law field")
         # the law's own fields last: make_spec's aliases (sigma_c sets tau_c) must not undo them
-        law = dataclasses.replace(spec.bond, **bond, moisture_content=float(cond.mc))
+        law = dataclasses.replace(spec.bond, **bond)
         law.to_core()
         return dataclasses.replace(spec, bond=law)
 

@@ -69,6 +69,9 @@ _AFTER_RELAX_FIELDS = ("name", "plate_speed", "max_dLD", "break_drop", "break_fr
 # the effects library, so that a new diametral contact effect needs no second edit here.
 _AFTER_RELAX_CONTACT = tuple(e.param[len("contact."):] for e in EFFECTS.values()
                              if e.stage == "diametral" and e.param.startswith("contact."))
+# The moisture content reaches compaction only through an effect that reads it
+# (ContactLaw.to_core().moisture_acts()); otherwise wet and dry share one relaxed pellet.
+_MOISTURE_CONTACT = ("moisture_content", "moisture_reference")
 
 
 def canonical(v, where: str = "value"):
@@ -145,7 +148,8 @@ class RunSpec:
         """Everything that determines the relaxed pellet (plain values)."""
         p = {k: v for k, v in self.preset.as_dict().items() if k not in _AFTER_RELAX_FIELDS}
         # the plates' crushing acts in the diametral test only: one relaxed pellet serves all
-        p["contact"] = {k: v for k, v in p["contact"].items() if k not in _AFTER_RELAX_CONTACT}
+        after = _after_relax_contact(self.preset.contact)
+        p["contact"] = {k: v for k, v in p["contact"].items() if k not in after}
         return {"format": CACHE_FORMAT, "version": __version__, "engine": engine_fingerprint(), "preset": p,
                 "sigma_z": float(self.sigma_z), "seed": int(self.seed)}
 
@@ -157,7 +161,8 @@ class RunSpec:
             d["diametral_format"] = DIAMETRAL_FORMAT
             d["bond"] = dataclasses.asdict(self.bond)
             d["after_relax"] = {k: getattr(self.preset, k) for k in _AFTER_RELAX_FIELDS if k != "name"}
-            d["after_relax"].update({k: getattr(self.preset.contact, k) for k in _AFTER_RELAX_CONTACT})
+            d["after_relax"].update({k: getattr(self.preset.contact, k)
+                                     for k in _after_relax_contact(self.preset.contact)})
         return d
 
     @property
@@ -169,6 +174,13 @@ class RunSpec:
     def relax_key(self) -> str:
         """Key of the relaxed pellet this run starts from (shared by all bond laws)."""
         return _digest(self.relax_payload())
+
+
+def _after_relax_contact(contact) -> Tuple[str, ...]:
+    """The fields of the ContactLaw ``contact`` that do not change fill..relax."""
+    if contact.to_core().moisture_acts():
+        return _AFTER_RELAX_CONTACT
+    return _AFTER_RELAX_CONTACT + _MOISTURE_CONTACT
 
 
 def cache_key(spec: RunSpec) -> str:

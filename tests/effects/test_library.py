@@ -35,7 +35,7 @@ def test_an_effect_is_off_by_default_and_its_probe_is_allowed(name):
 @pytest.mark.parametrize("field,value", [
     ("weibull_modulus", 0.1), ("weibull_modulus", float("nan")), ("strength_seed", -1.0),
     ("strength_seed", 0.5), ("softening", -1.0), ("overlap_radius_gain", -0.1),
-    ("moisture_coefficient", 2.0), ("moisture_content", 150.0)])
+    ("moisture_coefficient", 2.0)])
 def test_bad_bond_effect_parameters_name_themselves(field, value):
     with pytest.raises(ValueError, match=field):
         pd.BondLaw(**{field: value}).to_core()
@@ -43,7 +43,8 @@ def test_bad_bond_effect_parameters_name_themselves(field, value):
 
 @pytest.mark.parametrize("field,value", [("unloading_growth", -1.0), ("plate_yield_stress", -1.0),
                                          ("unloading_growth", float("inf")), ("hardening", -1.0),
-                                         ("hardening_exponent", 9.0)])
+                                         ("hardening_exponent", 9.0), ("moisture_yield", 2.0),
+                                         ("moisture_content", 150.0), ("moisture_reference", -1.0)])
 def test_bad_contact_effect_parameters_name_themselves(field, value):
     with pytest.raises(ValueError, match=field):
         pd.ContactLaw(**{field: value}).to_core()

@@ -66,7 +66,8 @@ def test_a_moisture_effect_is_hidden_in_data_of_two_moisture_contents_from_other
     # the same design for its control (the coefficient at 0)
     assert synthetic_design(synthetic_truth("bond.moisture_coefficient=0"), 2)[0] == conds
     # every other effect: three pressures at MC 8 %, the replicates those of before
-    for name in set(EFFECTS) - {"moisture_bonds"}:
+    assert synthetic_design(synthetic_truth("moisture_yield"), 2)[0] == conds
+    for name in set(EFFECTS) - {"moisture_bonds", "moisture_yield"}:
         c, h, s = synthetic_design(synthetic_truth(name), 1)
         assert [x.sigma_z for x in c] == [60e6, 120e6, 90e6] and {x.mc for x in c} == {8.0}
         assert h == (c[-1],) and set(s.values()) == {tuple(k + 10 for k in DATA_SEEDS)}

@@ -34,6 +34,9 @@ namespace pelletdem {
 
 struct BondParams {
   PELLETDEM_BOND_ALL_ROWS(PELLETDEM_PARAM_FIELD)
+  // Not rows: the sawdust's moisture is the contact law's (one value per world), copied here
+  // by World::create_bonds for the bond effects that read it, %.
+  double moisture_content = 8.0, moisture_reference = 8.0;
   void validate() const { PELLETDEM_BOND_ALL_ROWS(PELLETDEM_PARAM_CHECK) }
   static std::vector<ParamRow> rows() { return {PELLETDEM_BOND_ALL_ROWS(PELLETDEM_PARAM_ROW)}; }
 };

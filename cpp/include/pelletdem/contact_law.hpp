@@ -48,7 +48,12 @@ struct ContactHistory {
     "k1, k2, kc of a pair scaled by 2 r*/r_ref (eq. 7: stiffness proportional to size); ours: off, Table 4 " \
     "gives one mean")                                                                                        \
   X(double, r_ref, 2.0e-4, Positive, 0.0, kHuge, "m", "r_ref", true,                                         \
-    "reference radius of that scaling: Table 4's mean radius")
+    "reference radius of that scaling: Table 4's mean radius")                                               \
+  X(double, moisture_content, 8.0, Range, 0.0, 100.0, "%", "moisture_content", true,                         \
+    "moisture content MC of the sawdust (the condition's); the bonds made in it take it too. Only the "      \
+    "moisture effects read it")                                                                              \
+  X(double, moisture_reference, 8.0, Range, 0.0, 100.0, "%", "moisture_reference", true,                     \
+    "MC at which k1 and the bonds' E_b, sigma_c, tau_c hold: Tables 4-5 (oak, MC 8 %)")
 
 #define PELLETDEM_CONTACT_ALL_ROWS(X) PELLETDEM_CONTACT_ROWS(X) PELLETDEM_CONTACT_EFFECT_ROWS(X)
 
@@ -68,6 +73,9 @@ struct ContactLawParams {
   // True when pairs see only what the four-lane pair kernel implements: every row it lacks
   // keeps its default (no size scaling or normal damping; the contact effects' hooks it calls).
   bool plain_pairs() const { return true PELLETDEM_CONTACT_ALL_ROWS(PELLETDEM_PARAM_LANES); }
+  // True when an effect on makes compaction depend on the moisture content (the relaxed
+  // pellet then differs between moisture contents).
+  bool moisture_acts() const { return ContactEffects::reads_moisture(*this); }
   // True when every effect's row keeps its default: the law is the paper's.
   bool effects_off() const { return true PELLETDEM_CONTACT_EFFECT_ROWS(PELLETDEM_PARAM_AT_DEFAULT); }
   static std::vector<ParamRow> rows() { return {PELLETDEM_CONTACT_ALL_ROWS(PELLETDEM_PARAM_ROW)}; }

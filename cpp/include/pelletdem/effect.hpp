@@ -44,6 +44,11 @@ struct ContactEffect {
                          double /*r_eff*/) {
     return plain;
   }
+  // True when the effect, as set, reads the moisture content.
+  template <class P>
+  static bool reads_moisture(const P&) {
+    return false;
+  }
   // Largest loading force (N) of a wall contact of a particle of radius r (m), given the cap
   // so far; `crushable`: the wall is one of the diametral plates (Wall::crushable).
   template <class P>
@@ -93,6 +98,10 @@ struct EffectList {
   template <class P>
   static int unloading_shapers(const P& p) {
     return (0 + ... + static_cast<int>(E::shapes_unloading(p)));
+  }
+  template <class P>
+  static bool reads_moisture(const P& p) {
+    return (false || ... || E::reads_moisture(p));
   }
   template <class P>
   static double unloading_stiffness(const P& p, double k2, double delta0, double r_eff) {

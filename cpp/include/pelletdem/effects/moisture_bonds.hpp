@@ -1,17 +1,14 @@
 #pragma once
-// Moisture-dependent bonds: E_b, sigma_c and tau_c times exp(-c (MC - MC_ref)), a trend of the
+// Moisture-dependent bonds: E_b, sigma_c and tau_c times exp(-c (MC - MC_ref)) (MC and MC_ref: the
+// contact law's moisture_content and moisture_reference, copied at bonding), a trend of the
 // strength with moisture content, the same at every pressure.
 #include <cmath>
 
 #include "pelletdem/effect.hpp"
 
 #define PELLETDEM_ROWS_MoistureBonds(X)                                                            \
-  X(double, moisture_content, 8.0, Range, 0.0, 100.0, "%", "bond moisture_content", true,          \
-    "moisture content MC of the pellet's sawdust")                                                 \
-  X(double, moisture_reference, 8.0, Range, 0.0, 100.0, "%", "bond moisture_reference", true,      \
-    "moisture content at which the bonds have E_b, sigma_c, tau_c")                                \
   X(double, moisture_coefficient, 0.0, Range, -1.0, 1.0, "1/%", "bond moisture_coefficient", true, \
-    "c in exp(-c (MC - MC_ref)) on E_b, sigma_c and tau_c; 0 off")
+    "c in exp(-c (MC - MC_ref)) on E_b, sigma_c and tau_c (MC: the contact law's); 0 off")
 
 namespace pelletdem {
 

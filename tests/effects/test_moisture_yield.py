@@ -1,0 +1,71 @@
+"""moisture_yield (cpp effects/moisture_yield.hpp): the loading line k1 exp(-c (MC - MC_ref))
+delta. Two spheres pressed together follow it; unloaded they keep the residual overlap of eq. 5
+with that k1; a line steeper than k2 is followed at k2; off, or at MC_ref, it is the paper's."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import pelletdem as pd
+from test_contact_law import R, frictionless
+from test_hardening import _press
+
+
+def _wet(c, mc, ref=8.0):
+    law = frictionless()
+    law.moisture_yield, law.moisture_content, law.moisture_reference = c, mc, ref
+    return law
+
+
+@pytest.mark.parametrize("c,mc,ref", [(0.05, 20.0, 8.0), (-0.03, 20.0, 8.0), (0.05, 4.0, 12.0)])
+def test_loading_follows_the_moist_line(c, mc, ref):
+    law = _wet(c, mc, ref)
+    rows = _press(law, steps=2000)
+    fac = math.exp(-c * (mc - ref))
+    assert fac * law.k1 < law.k2
+    np.testing.assert_allclose(rows[:, 1], fac * law.k1 * rows[:, 0], rtol=1e-9)
+    assert law.to_core().plain_pairs() and law.to_core().moisture_acts()
+
+
+def test_the_residual_overlap_is_that_of_the_moist_k1():
+    """Loaded to delta_max and let go, the pair springs back to delta_max (1 - k1' / k2) with
+    k1' the moist k1 (eq. 5); separated it leaves that overlap as the contact's history."""
+    law = _wet(0.05, 20.0)
+    k1m = math.exp(-0.05 * 12.0) * law.k1
+    rows = _press(law, steps=2000)
+    d_max = rows[-1, 0]
+    w = pd.World(dt=1e-7, box=((-3e-3, -1e-3, -1e-3), (3e-3, 1e-3, 1e-3)), contact=law, gravity=(0, 0, 0),
+                 skin=2e-5)
+    w.add_particles(np.array([[-R, 0, 0], [R, 0, 0]]), np.array([R, R]))
+    v = 0.01
+    fn_at = []
+    for speed, steps in ((v, 2000), (-v, 4000)):
+        for _ in range(steps):
+            w.set_velocities(np.array([[speed, 0, 0], [-speed, 0, 0]]), np.zeros((2, 3)))
+            w.step()
+            c = w.contacts()
+            if len(c["overlap"]):
+                fn_at.append((c["overlap"][0], c["fn"][0]))
+    d, f = np.array(fn_at).T
+    top = int(np.argmax(d))
+    assert d[top] == pytest.approx(d_max, rel=1e-9)
+    unloading = slice(top + 1, None)
+    delta0 = d[top] * (1 - k1m / law.k2)
+    on_line = f[unloading] > 0
+    np.testing.assert_allclose(f[unloading][on_line], law.k2 * (d[unloading][on_line] - delta0), rtol=1e-7,
+                               atol=1e-12)
+
+
+def test_a_line_steeper_than_k2_is_followed_at_k2():
+    law = _wet(-0.2, 20.0)  # k1 e^2.4 = 11 k1 > k2 = 4 k1
+    rows = _press(law, steps=1000)
+    np.testing.assert_allclose(rows[:, 1], law.k2 * rows[:, 0], rtol=1e-9)
+
+
+@pytest.mark.parametrize("law", [_wet(0.0, 20.0), _wet(0.05, 8.0)])
+def test_off_or_at_the_reference_moisture_it_is_the_paper_line(law):
+    rows = _press(law, steps=500)
+    np.testing.assert_allclose(rows[:, 1], law.k1 * rows[:, 0], rtol=1e-12)
+    assert law.to_core().moisture_acts() == (law.moisture_yield != 0.0)
