@@ -12,7 +12,7 @@ says these data cannot reveal (nothing wrong may be named), the control ``none``
 may be added),
 or a law change no candidate is (``bond.kt_ratio=0.2``, ``contact.rolling=0.1``, ten times the
 default, ``contact.mu=0.3``: at most one draw in five may name a library effect). An effect
-that needs the moisture to vary (moisture_bonds) is hidden in data of two moisture contents,
+that needs the moisture to vary (moisture_bonds, moisture_yield) is hidden in data of two moisture contents,
 with its own control ``bond.moisture_coefficient=0`` (``pelletdem.loop_cli.synthetic_design``).
 Each draw
 takes other replicate packings and other measurement noise (the loop's own packings stay the
@@ -33,14 +33,14 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 #: Library effects at a moderate strength (their probe strengths), the control, and law
 #: changes no candidate is.
 EFFECT_CASES = ("plate_crushing", "hardening", "unloading_growth", "saturating_unloading", "overlap_bond_radius",
-                "moisture_bonds")
+                "moisture_bonds", "moisture_yield")
 #: Effects at strengths the loop's own power statement says these data cannot reveal at the
 #: default size (a Weibull modulus above ~2.1, a softening below ~2.1): run to check that the
 #: statement holds (nothing wrong is named), not counted as effects to name.
 BELOW_POWER_CASES = ("weibull_strength=3", "bond_softening=1")
 CONTROL = "none"
-#: The control of the moisture design (moisture_bonds' data: two moisture contents), whose
-#: library holds moisture_bonds too: its coefficient at 0 hides nothing.
+#: The control of the moisture design (the moisture effects' data: two moisture contents),
+#: whose library holds both moisture effects too: the bonds' coefficient at 0 hides nothing.
 MOISTURE_CONTROL = "bond.moisture_coefficient=0"
 OUTSIDE_CASES = ("bond.kt_ratio=0.2", "contact.rolling=0.1", "contact.mu=0.3")
 

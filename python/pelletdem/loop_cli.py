@@ -9,7 +9,7 @@
 Synthetic data are made as a laboratory's: five replicate pellets per condition from packings
 the fits never use (--draw picks another five and another noise), 2 % measurement noise,
 diametral curves, compaction curves and densities at 60, 90 and 120 MPa, 90 MPa held out;
-where the hidden effect needs the moisture to vary (moisture_bonds, or
+where the hidden effect needs the moisture to vary (moisture_bonds, moisture_yield, or
 bond.moisture_coefficient=0 as its control), 60 and 120 MPa at MC 8 and 20 %, 60 MPa at 20 %
 held out. Writes DIR/report.md with its figures and DIR/loop.json; DIR/cache keeps every
 simulation, so a rerun resumes.
@@ -91,7 +91,10 @@ def synthetic_truth(spec: str) -> dict:
             raise ValueError(f"--synthetic {spec!r}: allowed {e.lo:g} <= {e.param} <= {e.hi:g}")
         return e.settings(v)
     if (name.startswith("contact.") or name.startswith("bond.")) and value:
+        from .loop_simulators import refuse_condition_rows
+
         try:
+            refuse_condition_rows([name])
             return dict([parse_setting(name, value)])
         except ValueError as e:
             raise ValueError(f"--synthetic {spec!r}: {e}") from None
@@ -132,7 +135,10 @@ def _check(args) -> None:
         raise ValueError(f"--noise = {args.noise} is out of range: allowed 0 <= noise < 0.5")
     if not (0.0 < args.window <= 0.5):
         raise ValueError(f"--window = {args.window} is out of range: allowed 0 < window <= 0.5")
-    parse_settings(args.set)
+    from .loop_simulators import refuse_condition_rows
+
+    refuse_condition_rows(parse_settings(args.set), "--set")
+    refuse_condition_rows([f.partition("=")[0].strip() for f in args.fit or ()], "--fit")
     if args.synthetic is not None:
         synthetic_truth(args.synthetic)
     if args.data != "paper" and (args.held_out is not None or args.fit):
@@ -191,9 +197,11 @@ def run(args, title: str = "Discrepancy loop on") -> int:
 
     from . import loop
     from .loop_report import summary, write_report
+    from .loop_simulators import refuse_condition_rows
 
     _check(args)
     data, held, bounds, start, bond, settings, preset, subject = _problem(args)  # a bad file fails here
+    refuse_condition_rows(settings, "a manifest's setting")
     t0 = time.perf_counter()
     os.makedirs(args.out, exist_ok=True)
     cache = args.cache or os.path.join(args.out, "cache")

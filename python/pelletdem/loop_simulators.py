@@ -30,7 +30,8 @@ from .run_cache import RunCache
 from .runs import check_names, make_spec, run_setup
 from .worker import run_point
 
-__all__ = ["Prediction", "Ensemble", "Simulator", "FunctionSimulator", "EngineSimulator"]
+__all__ = ["Prediction", "Ensemble", "Simulator", "FunctionSimulator", "EngineSimulator", "CONDITION_ROWS",
+           "refuse_condition_rows"]
 
 # make_spec's base names and the law fields they set
 _ALIASES = (("E_b", "youngs_modulus"), ("sigma_c", "sigma_c"), ("tau_c", "tau_c"), ("r_b", "radius"), ("k1", "k1"),
@@ -212,6 +213,18 @@ class FunctionSimulator(Simulator):
         return self._n
 
 
+#: Law rows that each condition sets (the contact law's moisture content is the condition's mc).
+CONDITION_ROWS = ("contact.moisture_content",)
+
+
+def refuse_condition_rows(names, flag: str = "") -> None:
+    """ValueError when one of ``names`` is a row each condition sets (:data:`CONDITION_ROWS`)."""
+    for n in names:
+        if n in CONDITION_ROWS:
+            raise ValueError(f"{flag + ' ' if flag else ''}{n} is set by each condition's moisture content "
+                             "(mc): do not set or fit it")
+
+
 class EngineSimulator(Simulator):
     """The C++ pellet: fill -> compact (the condition's sigma_z) -> ... -> diametral test,
     through the calibration's run cache, relaxed-pellet reuse and executors
@@ -282,9 +295,7 @@ class EngineSimulator(Simulator):
                     base[root] = v
             else:
                 base[name] = v
-        if "moisture_content" in contact:
-            raise ValueError("contact.moisture_content is set by each condition's moisture content (mc): "
-                             "do not set or fit it")
+        refuse_condition_rows([*params, *(f"contact.{k}" for k in contact)])
         contact["moisture_content"] = float(cond.mc)
         for alias, fld in _ALIASES:
             if alias in base and fld in (contact if fld in ("k1",) else bond):

@@ -84,3 +84,13 @@ def test_the_command_line_passes_the_selector_and_shared_parameters_on():
             loop_cli._check(_args(*extra))
     with pytest.raises(ValueError, match="selects none"):
         loop_cli._check(_args("--data", "paper", "--held-out", "mc=12"))
+
+
+@pytest.mark.parametrize("extra,flag", [
+    (("--data", "paper", "--set", "contact.moisture_content=12"), "--set"),
+    (("--data", "paper", "--fit", "contact.moisture_content=5:20"), "--fit"),
+    (("--synthetic", "contact.moisture_content=20"), "--synthetic"),
+])
+def test_the_moisture_content_is_the_conditions_not_a_setting(extra, flag):
+    with pytest.raises(ValueError, match=f"{flag}.*contact.moisture_content is set by each condition"):
+        loop_cli._check(_args(*extra))

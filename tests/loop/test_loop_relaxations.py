@@ -54,3 +54,18 @@ def test_the_engine_says_which_parameters_compact_new_pellets():
         assert sim.same_relaxation(base, dict(base, **{"bond.softening": 2.0}), conds)
         assert not sim.same_relaxation(base, dict(base, **{"contact.hardening": 3.0}), conds)
         assert not sim.same_relaxation(base, dict(base, k1=3e4), conds)
+
+
+def test_wet_and_dry_pellets_share_a_relaxation_unless_the_yield_reads_the_moisture():
+    from pelletdem.loop import Condition, EngineSimulator
+
+    base = {"E_b": 6e7, "sigma_c": 9e6}
+    dry, wet = Condition(60e6, mc=8.0), Condition(60e6, mc=20.0)
+    with EngineSimulator("tiny") as sim:
+        a, b = sim._spec(base, dry, 0), sim._spec(base, wet, 0)
+        assert a.preset.contact.moisture_content == 8.0 and b.preset.contact.moisture_content == 20.0
+        assert a.relax_key == b.relax_key and a.key != b.key  # the bonds take the moisture
+        yielding = dict(base, **{"contact.moisture_yield": 0.03})
+        assert sim._spec(yielding, dry, 0).relax_key != sim._spec(yielding, wet, 0).relax_key
+        assert sim.same_relaxation(base, dict(base, **{"bond.moisture_coefficient": 0.03}), [dry, wet])
+        assert not sim.same_relaxation(base, yielding, [wet])
