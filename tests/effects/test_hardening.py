@@ -12,17 +12,24 @@ from test_contact_law import R, frictionless
 
 def _press(law, speed=0.01, steps=5000):
     """Two equal spheres driven together at `speed` each (m/s): (overlap m, f_n N) rows."""
+    return _drive(law, [(speed, steps)])
+
+
+def _drive(law, phases):
+    """Two equal spheres driven at +-speed each (m/s; > 0 together) for each (speed, steps) of
+    ``phases`` in turn: (overlap m, f_n N) rows while they touch."""
     w = pd.World(dt=1e-7, box=((-3e-3, -1e-3, -1e-3), (3e-3, 1e-3, 1e-3)), contact=law,
                  gravity=(0, 0, 0), skin=2e-5)
     w.add_particles(np.array([[-R, 0, 0], [R, 0, 0]]), np.array([R, R]))
     rows = []
-    for _ in range(steps):
-        # the spheres are held to the speed, whatever the contact pushes
-        w.set_velocities(np.array([[speed, 0, 0], [-speed, 0, 0]]), np.zeros((2, 3)))
-        w.step()
-        c = w.contacts()
-        if len(c["overlap"]):
-            rows.append((c["overlap"][0], c["fn"][0]))
+    for speed, steps in phases:
+        for _ in range(steps):
+            # the spheres are held to the speed, whatever the contact pushes
+            w.set_velocities(np.array([[speed, 0, 0], [-speed, 0, 0]]), np.zeros((2, 3)))
+            w.step()
+            c = w.contacts()
+            if len(c["overlap"]):
+                rows.append((c["overlap"][0], c["fn"][0]))
     return np.array(rows)
 
 
