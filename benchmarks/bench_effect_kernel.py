@@ -25,6 +25,7 @@ EFFECTS = {
     "hardening": {"hardening": 0.05},
     "unloading_growth": {"unloading_growth": 7.0},
     "saturating_unloading": {"plastic_stiffness_ratio": 5.0},
+    "moisture_yield": {"moisture_yield": 0.03, "moisture_content": 20.0},
 }
 
 #: Largest ratio of an effect's life to the paper's law's.
