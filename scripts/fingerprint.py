@@ -27,7 +27,8 @@ CASES = [
     ("weibull_strength", {}, {"weibull_modulus": 2.5, "strength_seed": 7.0}),
     ("bond_softening", {}, {"softening": 1.5}),
     ("overlap_bond_radius", {}, {"overlap_radius_gain": 3.0}),
-    ("moisture_bonds", {}, {"moisture_coefficient": 0.03, "moisture_content": 20.0}),
+    ("moisture_bonds", {"moisture_content": 20.0}, {"moisture_coefficient": 0.03}),
+    ("moisture_yield", {"moisture_yield": 0.03, "moisture_content": 20.0}, {}),
 ]
 
 
