@@ -86,6 +86,8 @@ class ContactLawParams:
         """Raise ParameterError naming the first field out of its range."""
     def plain_pairs(self) -> bool:
         """True while every row the four-lane pair kernel lacks keeps its default."""
+    def moisture_acts(self) -> bool:
+        """True when an effect on makes compaction depend on moisture_content (%)."""
     @staticmethod
     def rows() -> list[ParamRow]:
         """The law's parameter table."""
