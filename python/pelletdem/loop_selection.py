@@ -149,18 +149,35 @@ class LoopResult:
         return "\n".join(rows)
 
 
+#: Data with dL_f/D but no curve: the test runs to this many times the largest dL_f/D.
+SCALAR_REACH = 2.0
+#: ... and ends once the plate force has fallen to this fraction of its peak (after the
+#: failure, a 10 % fall, :data:`pelletdem.worker.FAILURE_DROP`).
+SCALAR_BREAK_DROP = 0.5
+
+
 def _fit_window(sim: Simulator, data: Dataset, say: Callable[[str], None]) -> str:
     """Fit the simulator's diametral window (``max_dLD``, ``widen``) to the data's reach (their
     last curve point and dL_f/D, plus 10 %) before any fit: wider when the data go further,
     narrower when they stop short (a test's cost grows with its length; a model that then
-    fails outside is caught by :func:`unfailed`). Returns the sentence to add to the verdict
-    when it cannot widen ('' when nothing is wrong)."""
-    xs = [o.x for o in data.observations if o.quantity == "sigma_1"]
-    xs += [o.value for o in data.observations if o.quantity == "dLf_D"]
+    fails outside is caught by :func:`unfailed`). Data with dL_f/D and no curve (the paper's
+    Table 3) say where the pellet fails, not how far the test went: a model's packings fail
+    either side of it, so the test runs to :data:`SCALAR_REACH` times the largest and, where
+    the simulator can (``end_at_break``), stops once the pellet has broken. Returns the
+    sentence to add to the verdict when it cannot widen ('' when nothing is wrong)."""
+    curve = [o.x for o in data.observations if o.quantity == "sigma_1"]
+    failures = [o.value for o in data.observations if o.quantity == "dLf_D"]
+    xs = curve + failures
     end = getattr(sim, "max_dLD", None)
     if not xs or end is None:
         return ""
     reach = 1.1 * max(xs)
+    if not curve:
+        reach = SCALAR_REACH * max(failures)
+        if getattr(sim, "end_at_break", None) is not None:
+            sim.end_at_break(SCALAR_BREAK_DROP)
+            say(f"the data give dL_f/D, no curve: each test ends once its force has fallen to "
+                f"{SCALAR_BREAK_DROP:.0%} of its peak")
     if reach <= end:
         if getattr(sim, "widen", None) is not None and reach < 0.9 * end:
             say(f"the data reach dL/D = {max(xs):.3g}: the tests run to dL/D = {reach:.3g} instead of {end:.3g}")

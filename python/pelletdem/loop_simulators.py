@@ -248,9 +248,7 @@ class EngineSimulator(Simulator):
         self.setup = run_setup(preset, bond if bond is not None else BondLaw(), dict(contact or {}),
                                tuple(seeds), max_dLD)
         if break_drop:
-            if not 0.0 < break_drop < 1.0:
-                raise ValueError(f"break_drop = {break_drop!r} is out of range: allowed 0 < break_drop < 1")
-            self.setup = dataclasses.replace(self.setup, preset=self.setup.preset.with_(break_drop=break_drop))
+            self.end_at_break(break_drop)
         self.default_seeds = tuple(int(s) for s in seeds)
         self._stack = contextlib.ExitStack()
         ex = self._stack.enter_context(open_executor(executor, max_workers))
@@ -270,6 +268,13 @@ class EngineSimulator(Simulator):
         """Run later diametral tests to ``max_dLD`` (-): further for a test that ended before its
         peak, shorter where the data stop sooner."""
         self.setup = dataclasses.replace(self.setup, max_dLD=float(max_dLD))
+
+    def end_at_break(self, drop: float) -> None:
+        """End later diametral tests once the plate force has fallen to ``drop`` (0 < drop < 1)
+        of its peak: where only the failure is measured, the rest of a test costs time."""
+        if not 0.0 < drop < 1.0:
+            raise ValueError(f"break_drop = {drop!r} is out of range: allowed 0 < break_drop < 1")
+        self.setup = dataclasses.replace(self.setup, preset=self.setup.preset.with_(break_drop=float(drop)))
 
     @property
     def n_simulations(self) -> int:

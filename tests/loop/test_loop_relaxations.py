@@ -3,6 +3,7 @@ compacts new pellets, so the designs pair their points on such axes."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from toy_pellet import FIT, PACKING, toy
 
 from pelletdem.loop import FunctionSimulator
@@ -69,3 +70,17 @@ def test_wet_and_dry_pellets_share_a_relaxation_unless_the_yield_reads_the_moist
         assert sim._spec(yielding, dry, 0).relax_key != sim._spec(yielding, wet, 0).relax_key
         assert sim.same_relaxation(base, dict(base, **{"bond.moisture_coefficient": 0.03}), [dry, wet])
         assert not sim.same_relaxation(base, yielding, [wet])
+
+
+def test_the_engine_ends_its_tests_at_the_break_when_asked_and_shares_the_relaxed_pellets():
+    from pelletdem.loop import Condition, EngineSimulator
+
+    base, cond = {"E_b": 6e7, "sigma_c": 9e6}, Condition(60e6)
+    with EngineSimulator("tiny") as sim:
+        before = sim._spec(base, cond, 0)
+        sim.end_at_break(0.5)
+        after = sim._spec(base, cond, 0)
+        assert after.preset.break_drop == 0.5 and after.relax_key == before.relax_key and after.key != before.key
+        for bad in (0.0, 1.0, float("nan")):
+            with pytest.raises(ValueError, match="break_drop"):
+                sim.end_at_break(bad)

@@ -16,7 +16,7 @@ from toy_pellet import BOUNDS, FIT, HELD, LIBRARY, START, TRUTH, toy
 
 from conftest import toy_loop
 from pelletdem.loop import FunctionSimulator, Prediction, close_loop, synthetic_dataset
-from pelletdem.loop_selection import unfailed
+from pelletdem.loop_selection import SCALAR_BREAK_DROP, SCALAR_REACH, unfailed
 
 HIDDEN = {"toe": 0.5, "tail": 1.0, "trend": 1.0, "springback": 10.0}
 
@@ -149,6 +149,21 @@ def test_a_fitted_model_that_does_not_fail_gets_a_wider_window():
     res = close_loop(sim, data, BOUNDS, START, held_out=lambda c: c in HELD, library=LIBRARY, max_effects=0)
     assert sim.max_dLD > 0.03
     assert any("does not fail within the test window" in line for line in res.log)
+
+
+def test_data_of_failures_alone_get_a_window_either_side_of_them_and_tests_that_end_at_the_break():
+    # the paper's Table 3: sigma_f and dL_f/D, no curve; a window at 1.1 dL_f/D would cut off
+    # the half of the model's packings that fail later than the mean
+    full = synthetic_dataset(WindowedToy(0.5), TRUTH, FIT + HELD, noise=0.02, compaction_points=4)
+    data = full.subset(lambda o: o.quantity != "sigma_1")
+    reach = max(o.value for o in data.observations if o.quantity == "dLf_D")
+    sim = WindowedToy(0.5)
+    drops = []
+    sim.end_at_break = drops.append
+    res = close_loop(sim, data, BOUNDS, START, held_out=lambda c: c in HELD, library=LIBRARY, max_effects=0)
+    assert sim.max_dLD == pytest.approx(SCALAR_REACH * reach) and drops == [SCALAR_BREAK_DROP]
+    assert any("no curve: each test ends once its force has fallen" in line for line in res.log)
+    assert not unfailed(res.baseline, res.fit_data)
 
 
 def test_synthetic_data_refuse_replicates_that_do_not_break():
