@@ -7,6 +7,7 @@ import time
 
 import pytest
 
+from pelletdem import BondLaw
 from pelletdem import calibrate as C
 
 TINY = dict(preset="tiny", sigma_z=120e6)
@@ -113,3 +114,22 @@ def test_calibrate_variants_puts_back_a_missing_relaxed_pellet_once(tmp_path):
     assert rep.n_relaxations == 1
     assert rep.n_simulations == 3  # the density run again and one new point per new variant
     assert [p.name for p in (tmp_path / "relaxed").glob("*.h5")] == [pellet.name]
+
+
+def test_a_branch_bonds_at_its_own_moisture_content():
+    """Wet and dry runs share a relaxed pellet (no effect reads the moisture during compaction);
+    a wet branch off a pellet relaxed for a dry run bonds as a pellet relaxed for it would."""
+    bond = BondLaw(moisture_coefficient=0.03)
+    dry = C.make_spec({"E_b": TRUE_E_B, "sigma_c": TRUE_SIGMA_C}, max_dLD=0.03, bond=bond, **TINY)
+    wet = C.make_spec({"E_b": TRUE_E_B, "sigma_c": TRUE_SIGMA_C}, max_dLD=0.03, bond=bond,
+                      contact={"moisture_content": 20.0}, **TINY)
+    assert dry.relax_key == wet.relax_key
+    C.clear_memo()
+    C.run_point(dry)
+    branch = C.run_point(wet)
+    assert branch["relaxed_reused"]
+    C.clear_memo()
+    fresh = C.run_point(wet)
+    assert not fresh["relaxed_reused"]
+    assert branch["outputs"] == fresh["outputs"] and branch["curve"] == fresh["curve"]
+    assert branch["outputs"]["sigma_f_max"] < C.run_point(dry)["outputs"]["sigma_f_max"]

@@ -166,6 +166,14 @@ def _release_damping(pellet: Pellet, on: bool) -> None:
         w.set_contact_law(replace(law, normal_damping_ratio=ratio))
 
 
+def _preset_law(pellet: Pellet) -> None:
+    """Put the preset's contact law in force. A pellet relaxed once serves runs whose laws
+    differ in what acts after relaxation (the calibration and the loop branch bond-parameter
+    runs off one relaxed pellet): the moisture content its bonds take, the plates' crushing."""
+    if pellet.world.contact_law != pellet.preset.contact:
+        pellet.world.set_contact_law(pellet.preset.contact)
+
+
 # --- fill ------------------------------------------------------------------------------------
 
 def fill(preset: Preset, seed: int = 0, threads: int = 1, n_particles: Optional[int] = None,
@@ -441,6 +449,7 @@ def bond(pellet: Pellet, law: BondLaw, ramp_time: Optional[float] = None,
     w = pellet.world
     core_law = law.to_core()  # validates before any work
     _release_damping(pellet, False)
+    _preset_law(pellet)  # the bonds take its moisture content
     n_bonds = w.create_bonds(core_law)
     w.set_adhesion_ramp(w.time, tr)
     steps = int(2.0 * tr / w.dt) + 1
@@ -515,10 +524,7 @@ def diametral(pellet: Pellet, speed: Optional[float] = None, max_dLD: Optional[f
     lo, hi = pellet.walls["plate_low"], pellet.walls["plate_high"]
     w.set_wall_crushable(lo, True)  # effects acting under the plates act here only
     w.set_wall_crushable(hi, True)
-    # A pellet relaxed once serves tests whose laws differ in what acts after relaxation (the
-    # calibration branches bond-parameter runs off one relaxed pellet): the preset's law rules.
-    if w.contact_law != pellet.preset.contact:
-        w.set_contact_law(pellet.preset.contact)
+    _preset_law(pellet)
     w.set_load_walls([lo, hi])
     w.set_wall_velocity(lo, (0.0, 0.5 * v, 0.0))
     w.set_wall_velocity(hi, (0.0, -0.5 * v, 0.0))
