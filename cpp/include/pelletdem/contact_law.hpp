@@ -113,6 +113,7 @@ class HystereticLaw {
     // With every effect's rows at their defaults (the paper's law) the hooks are skipped: they
     // would give back what they are given, at a few branches per contact.
     effects_ = !p.effects_off();
+    k1_factor_ = effects_ ? ContactEffects::loading_stiffness_factor(p) : 1.0;
   }
 
   const ContactLawParams& params() const { return p_; }
@@ -156,7 +157,7 @@ class HystereticLaw {
   PELLETDEM_INLINE double normal_force(double delta, double& delta0, double r_eff, double adhesion_scale,
                                        bool wall = false, double load_cap = kHuge) const {
     const double s = stiffness_scale(r_eff, wall);
-    const double k1 = s * p_.k1, k2 = s * p_.k2, kc = s * p_.kc * adhesion_scale;
+    const double k1 = s * p_.k1 * k1_factor_, k2 = s * p_.k2, kc = s * p_.kc * adhesion_scale;
     const double k2e = unloading_stiffness(k2, delta0, r_eff);
     const double f_elastic = k2e * (delta - delta0);
     // a capped (crushing) loading branch stiffens again once the particle is crushed to
@@ -218,6 +219,7 @@ class HystereticLaw {
   ContactLawParams p_;
   double damping_factor_ = 0.0;
   bool effects_ = false;  // some effect's row is off its default
+  double k1_factor_ = 1.0;  // the effects' factor on k1 (loading_stiffness_factor)
 };
 
 }  // namespace pelletdem

@@ -26,6 +26,11 @@ struct ContactEffect {
   static double loading_force(const P&, double f, double /*delta*/, double /*r_eff*/) {
     return f;
   }
+  // Factor on k1 of every contact, constant for the law: evaluated once, when the law is made.
+  template <class P>
+  static double loading_stiffness_factor(const P&) {
+    return 1.0;
+  }
   // True when the effect makes the unloading stiffness depend on the contact's history (one
   // such effect at a time: its `residual` must solve for its own stiffness).
   template <class P>
@@ -93,6 +98,12 @@ struct EffectList {
   template <class P>
   static double loading_force(const P& p, double f, double delta, double r_eff) {
     ((f = E::loading_force(p, f, delta, r_eff)), ...);
+    return f;
+  }
+  template <class P>
+  static double loading_stiffness_factor(const P& p) {
+    double f = 1.0;
+    ((f *= E::loading_stiffness_factor(p)), ...);
     return f;
   }
   template <class P>

@@ -20,10 +20,10 @@ struct MoistureYield : ContactEffect {
   static bool reads_moisture(const P& p) {
     return p.moisture_yield != 0.0;
   }
+  // A factor on k1, not on the loading force: one exp per law, not one per contact and step.
   template <class P>
-  static double loading_force(const P& p, double f, double /*delta*/, double /*r_eff*/) {
-    if (p.moisture_yield == 0.0) return f;
-    return f * std::exp(-p.moisture_yield * (p.moisture_content - p.moisture_reference));
+  static double loading_stiffness_factor(const P& p) {
+    return std::exp(-p.moisture_yield * (p.moisture_content - p.moisture_reference));
   }
 };
 
