@@ -58,8 +58,9 @@ def held_out_selector(text: str) -> Callable[[Condition], bool]:
 def shared_bounds(items: Iterable[str]) -> Dict[str, Tuple[float, float]]:
     """{name: (lo, hi)} (SI) from ``"NAME=LO:HI"`` strings: base parameters fitted once for
     every variant. NAME is one of :data:`pelletdem.runs.PARAMETERS` other than the per-material
-    ones and sigma_z (k1, p_y, r_b, tau_c), or a law row ``contact.X`` / ``bond.X``, whose
-    bounds are checked against its table."""
+    ones and sigma_z (k1, p_y, r_b, tau_c; positive bounds), or a law row ``contact.X`` /
+    ``bond.X``, whose bounds are checked against its table (a signed row may take negative
+    ones: it is then fitted on a linear axis)."""
     from .law_settings import parse_setting
     from .runs import PARAMETERS
 
@@ -77,13 +78,16 @@ def shared_bounds(items: Iterable[str]) -> Dict[str, Tuple[float, float]]:
             lo, hi = float(lo_text), float(hi_text)
         except ValueError:
             raise ValueError(f"--fit {item!r}: LO and HI must be numbers") from None
-        if not (math.isfinite(lo) and math.isfinite(hi) and 0 < lo < hi):
-            raise ValueError(f"--fit {item!r}: need 0 < LO < HI, finite")
-        if name.startswith("contact.") or name.startswith("bond."):
-            parse_setting(name, lo)  # the row exists and takes both ends
+        law_row = name.startswith("contact.") or name.startswith("bond.")
+        if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+            raise ValueError(f"--fit {item!r}: need LO < HI, finite")
+        if law_row:
+            parse_setting(name, lo)  # the row exists and takes both ends (a signed row: either sign)
             parse_setting(name, hi)
         elif name not in allowed:
             raise ValueError(f"--fit {item!r}: allowed {', '.join(allowed)} or contact.X / bond.X")
+        elif lo <= 0:
+            raise ValueError(f"--fit {item!r}: {name} needs 0 < LO < HI")
         if name in out:
             raise ValueError(f"--fit {name} given twice")
         out[name] = (lo, hi)

@@ -62,7 +62,8 @@ def test_a_bad_selector_names_itself(sel, msg):
 
 @pytest.mark.parametrize("item,msg", [
     ("k1", "NAME=LO:HI"), ("k1=3e4", "NAME=LO:HI"), ("E_b=1e8:1e9", "per material already"),
-    ("k1=a:b", "must be numbers"), ("k1=2e5:3e4", "0 < LO < HI"), ("k1=-1:3", "0 < LO < HI"),
+    ("k1=a:b", "must be numbers"), ("k1=2e5:3e4", "LO < HI"), ("k1=-1:3", "0 < LO < HI"),
+    ("contact.moisture_yield=-2:0.1", "moisture_yield"), ("k1=1:inf", "finite"),
     ("sigma_z=1e7:2e8", "allowed"), ("colour=1:2", "allowed"), ("contact.nope=1:2", "no such contact law"),
     ("contact.mu=0.2:20", "mu"),
 ])
@@ -94,3 +95,7 @@ def test_the_command_line_passes_the_selector_and_shared_parameters_on():
 def test_the_moisture_content_is_the_conditions_not_a_setting(extra, flag):
     with pytest.raises(ValueError, match=f"{flag}.*contact.moisture_content is set by each condition"):
         loop_cli._check(_args(*extra))
+
+
+def test_a_signed_law_row_is_fitted_across_zero():
+    assert shared_bounds(["contact.moisture_yield=-0.05:0.1"]) == {"contact.moisture_yield": (-0.05, 0.1)}
