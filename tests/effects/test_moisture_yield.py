@@ -7,10 +7,9 @@ import math
 
 import numpy as np
 import pytest
-
-import pelletdem as pd
-from test_contact_law import frictionless
 from test_hardening import _drive, _press
+
+from test_contact_law import frictionless
 
 
 def _wet(c, mc, ref=8.0):

@@ -218,7 +218,7 @@ class HystereticLaw {
  private:
   ContactLawParams p_;
   double damping_factor_ = 0.0;
-  bool effects_ = false;  // some effect's row is off its default
+  bool effects_ = false;    // some effect's row is off its default
   double k1_factor_ = 1.0;  // the effects' factor on k1 (loading_stiffness_factor)
 };
 
