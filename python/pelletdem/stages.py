@@ -448,8 +448,7 @@ def bond(pellet: Pellet, law: BondLaw, ramp_time: Optional[float] = None,
     tr = _check_positive("ramp_time", pellet.preset.bond_ramp_time if ramp_time is None else ramp_time, "s")
     w = pellet.world
     core_law = law.to_core()  # validates before any work
-    _release_damping(pellet, False)
-    _preset_law(pellet)  # the bonds take its moisture content
+    _preset_law(pellet)  # the relaxation's damping off; the bonds take its moisture content
     n_bonds = w.create_bonds(core_law)
     w.set_adhesion_ramp(w.time, tr)
     steps = int(2.0 * tr / w.dt) + 1
