@@ -215,9 +215,15 @@ def run(args, title: str = "Discrepancy loop on") -> int:
             log.flush()
 
         client = _executor(args)
+        density = None
+        if args.data == "paper":
+            from .loop_paper import particle_densities
+
+            density = particle_densities(_materials(args))
         with loop.EngineSimulator(preset, bond=bond, contact=contact, seeds=tuple(range(args.packings)),
                                   max_dLD=args.window, executor=client, max_workers=args.workers,
-                                  cache_dir=cache, relaxed_dir=os.path.join(cache, "relaxed")) as sim:
+                                  cache_dir=cache, relaxed_dir=os.path.join(cache, "relaxed"),
+                                  particle_density=density) as sim:
             if isinstance(data, tuple):
                 conds, truth = data
                 seeds = synthetic_design(truth, args.draw)[2]

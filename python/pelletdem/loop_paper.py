@@ -6,7 +6,9 @@ are fitted per material and shared by its four variants: the paper fits them per
 (Table 5), which leaves nothing over for a held-out variant to check and lets the bonds absorb
 every trend with pressure and moisture, the trends the loop is meant to trace. Other base
 parameters (the contact's k1 or p_y, say) may be fitted too, shared by every variant. Which
-variants are held out is a selector on their conditions, by default MC 20 % at 60 MPa.
+variants are held out is a selector on their conditions, by default MC 20 % at 60 MPa. Each
+material's particles have its intact wood's bulk density (Table 2's BD_w; Table 4's 680
+kg/m^3 is oak's): the model's pellet density is its solid fraction times that.
 """
 from __future__ import annotations
 
@@ -15,7 +17,8 @@ from typing import Callable, Dict, Iterable, Optional, Sequence, Tuple
 
 from .loop_data import Condition, Dataset
 
-__all__ = ["PER_MATERIAL", "DEFAULT_HELD_OUT", "held_out_selector", "shared_bounds", "paper_problem"]
+__all__ = ["PER_MATERIAL", "DEFAULT_HELD_OUT", "held_out_selector", "shared_bounds", "paper_problem",
+           "particle_densities"]
 
 #: Base parameters fitted per material, with their bounds (SI): Table 5's bonds lie inside.
 PER_MATERIAL: Dict[str, Tuple[float, float]] = {"E_b": (1e8, 1e10), "sigma_c": (5e6, 5e8)}
@@ -111,3 +114,16 @@ def paper_problem(materials: Sequence[str], held_out: str = DEFAULT_HELD_OUT,
     bounds = {f"{p}[{m}]": b for m in materials for p, b in PER_MATERIAL.items()}
     bounds.update(extra)
     return data, held, bounds
+
+
+def particle_densities(materials: Sequence[str]) -> Dict[str, float]:
+    """{material: its particles' density, kg/m^3}: Table 2's bulk density of the intact wood
+    (measured at MC 8 % only, used at both moisture contents). A sawdust particle is a piece of
+    wood with the wood's own pores; Table 1's pycnometric densities are of the cell wall."""
+    from .paper_tables import variants
+
+    out = {v.material: float(v.bd_wood) for v in variants() if v.material in set(materials)}
+    missing = sorted(set(materials) - set(out))
+    if missing:
+        raise ValueError(f"materials {missing}: allowed {sorted({v.material for v in variants()})}")
+    return out

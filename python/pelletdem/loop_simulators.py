@@ -27,7 +27,7 @@ from .engine import BondLaw
 from .execution import Evaluator, open_executor, with_relaxed_dir
 from .loop_data import Condition, Observation
 from .run_cache import RunCache
-from .runs import check_names, make_spec, run_setup
+from .runs import check_names, check_positive, make_spec, run_setup
 from .worker import run_point
 
 __all__ = ["Prediction", "Ensemble", "Simulator", "FunctionSimulator", "EngineSimulator", "CONDITION_ROWS",
@@ -239,14 +239,22 @@ class EngineSimulator(Simulator):
     checkpoints. Parameters: base names of :data:`pelletdem.calibrate.PARAMETERS`, optionally
     per material as ``name[material]``, and any ``contact.<field>`` / ``bond.<field>``. The
     condition's moisture content is the contact law's (``contact.moisture_content``), which the
-    bonds take too.
+    bonds take too. ``particle_density``: {material: the particles' density, kg/m^3} for
+    conditions of those materials (others keep the preset's): the pellet's mechanics are
+    quasi-static (the mass is scaled for the time step), so a material's density changes the
+    bulk density its relaxed packing has, not the packing: the predicted bulk density is the
+    simulated one times the material's density over the preset's, and one relaxed pellet serves
+    every material.
     """
 
     def __init__(self, preset="tiny", *, bond=None, contact: Optional[Mapping[str, float]] = None,
                  seeds: Sequence[int] = (0,), max_dLD: Optional[float] = None, break_drop: float = 0.0,
-                 executor="serial", max_workers: Optional[int] = None, cache_dir=None, relaxed_dir=None):
+                 executor="serial", max_workers: Optional[int] = None, cache_dir=None, relaxed_dir=None,
+                 particle_density: Optional[Mapping[str, float]] = None):
         self.setup = run_setup(preset, bond if bond is not None else BondLaw(), dict(contact or {}),
                                tuple(seeds), max_dLD)
+        self._density_factor = {str(m): check_positive(f"particle_density[{m}]", v, "kg/m^3")
+                                / self.setup.preset.density for m, v in (particle_density or {}).items()}
         if break_drop:
             self.end_at_break(break_drop)
         self.default_seeds = tuple(int(s) for s in seeds)
@@ -321,18 +329,21 @@ class EngineSimulator(Simulator):
                  for s in seeds]
         recs = self.evaluator.run_all([sp for _, _, _, sp in specs])
         by_key = {(k, c, s): rec for (k, c, s, _), rec in zip(specs, recs)}
-        return [{c: Ensemble(seeds, tuple(_prediction(by_key[(k, c, s)]) for s in seeds)) for c in conditions}
+        return [{c: Ensemble(seeds, tuple(_prediction(by_key[(k, c, s)], self._density_factor.get(c.material, 1.0))
+                                          for s in seeds)) for c in conditions}
                 for k in range(len(params_list))]
 
 
-def _prediction(rec: dict) -> Prediction:
-    """One run record (pelletdem.worker.run_point) as a Prediction."""
+def _prediction(rec: dict, density_factor: float = 1.0) -> Prediction:
+    """One run record (pelletdem.worker.run_point) as a Prediction; ``density_factor``: the
+    material's particle density over the simulated one (-)."""
     if not rec["ok"]:
         return Prediction(ok=False, error=rec.get("error") or "failed")
     outs = rec["outputs"]
     sc = {key: float(outs.get(out, float("nan"))) for key, out in (
         ("sigma_f", "sigma_f"), ("dLf_D", "dLf_D"), ("bulk_density", "bulk_density_relaxed"),
         ("coordination_number", "coordination_number_relaxed_bulk"), ("peaked", "peaked"))}
+    sc["bulk_density"] *= density_factor
     curve = rec.get("curve") or {}
     comp = rec.get("compaction_curve") or {}
     return Prediction((np.asarray(curve.get("dL_D", []), float), np.asarray(curve.get("sigma_1", []), float)),

@@ -99,3 +99,15 @@ def test_the_moisture_content_is_the_conditions_not_a_setting(extra, flag):
 
 def test_a_signed_law_row_is_fitted_across_zero():
     assert shared_bounds(["contact.moisture_yield=-0.05:0.1"]) == {"contact.moisture_yield": (-0.05, 0.1)}
+
+
+def test_each_material_s_particles_have_its_wood_s_density():
+    from pelletdem.loop_paper import particle_densities
+    from pelletdem.presets import get_preset
+
+    rho = particle_densities(["oak", "birch", "pine"])
+    assert rho == {"oak": 675.0, "birch": 550.0, "pine": 510.0}  # Table 2, BD_w at MC 8 %
+    # Table 4's particle density is oak's
+    assert rho["oak"] == pytest.approx(get_preset("tiny").density, rel=0.01)
+    with pytest.raises(ValueError, match="spruce"):
+        particle_densities(["spruce"])

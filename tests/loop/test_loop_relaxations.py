@@ -84,3 +84,21 @@ def test_the_engine_ends_its_tests_at_the_break_when_asked_and_shares_the_relaxe
         for bad in (0.0, 1.0, float("nan")):
             with pytest.raises(ValueError, match="break_drop"):
                 sim.end_at_break(bad)
+
+
+def test_a_material_s_particle_density_scales_its_bulk_density_and_shares_the_relaxed_pellet():
+    from pelletdem.loop import Condition, EngineSimulator
+    from pelletdem.loop_simulators import _prediction
+
+    base = {"E_b": 6e7, "sigma_c": 9e6}
+    oak, birch = Condition(120e6, 8.0, "oak"), Condition(120e6, 8.0, "birch")
+    with EngineSimulator("tiny", particle_density={"birch": 550.0}) as sim:
+        assert sim._spec(base, oak, 0).relax_key == sim._spec(base, birch, 0).relax_key
+        rho = sim.setup.preset.density
+        assert sim._density_factor == {"birch": pytest.approx(550.0 / rho)}
+    rec = {"ok": True, "outputs": {"bulk_density_relaxed": 500.0, "sigma_f": 1e6}}
+    assert _prediction(rec, 550.0 / 680.0).scalars["bulk_density"] == pytest.approx(500.0 * 550.0 / 680.0)
+    assert _prediction(rec).scalars["bulk_density"] == 500.0
+    for bad in (0.0, -5.0, float("nan"), "heavy"):
+        with pytest.raises(ValueError, match=r"particle_density\[pine\]"):
+            EngineSimulator("tiny", particle_density={"pine": bad})
