@@ -132,11 +132,14 @@ def chi2_of(z: np.ndarray) -> float:
 
 def simulate_design(sim: Simulator, space: Space, data: Dataset, seeds: Sequence[int],
                     n: Optional[int] = None, U: Optional[np.ndarray] = None,
-                    relaxing: Sequence[int] = ()) -> Tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+                    relaxing: Sequence[int] = (), errors: Optional[List[str]] = None
+                    ) -> Tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(U, Y, SE, V): the design positions of ``space`` (default its Sobol design of ``n``
     points, its points paired on the ``relaxing`` axes, :func:`share_relaxations`), the
     ensemble means and standard errors of every observation of ``data`` there, simulated on
-    ``seeds``, and each packing's own prediction, V[point, packing, observation]."""
+    ``seeds``, and each packing's own prediction, V[point, packing, observation]. ``errors``:
+    a list that gets, per point whose simulation failed, its parameters and the engine's
+    message."""
     if U is None:
         U = share_relaxations(design(space.dim, n or design_size(space.dim)), relaxing)
     conds = data.conditions
@@ -145,6 +148,9 @@ def simulate_design(sim: Simulator, space: Space, data: Dataset, seeds: Sequence
     SE = np.empty_like(Y)
     V = np.empty((len(U), len(seeds), len(data)))
     for k, p in enumerate(preds):
+        bad = next((e.error for e in p.values() if not e.ok), "")
+        if bad and errors is not None:
+            errors.append(", ".join(f"{a} = {v:.4g}" for a, v in space.params(U[k]).items()) + f": {bad}")
         for i, o in enumerate(data.observations):
             Y[k, i], SE[k, i] = p[o.condition].mean_se(o)
             V[k, :, i] = p[o.condition].values(o)
@@ -189,7 +195,8 @@ def fit_model(sim: Simulator, space: Space, effects: Sequence[str], fit_data: Da
     log(f"{name}: simulating {n_new} design points on {len(fit_seeds)} packings x "
         f"{len(fit_data.conditions)} conditions")
     relaxing = relaxing_axes(sim, space, fit_data.conditions)
-    U, Y, SE, V = simulate_design(sim, space, fit_data, fit_seeds, n_design, relaxing=relaxing)
+    errors: List[str] = []
+    U, Y, SE, V = simulate_design(sim, space, fit_data, fit_seeds, n_design, relaxing=relaxing, errors=errors)
     UV, VV = [U], [V]  # the points simulated here, with each packing's prediction
     k = len(fit_seeds)
     estimate = noise is None
@@ -201,7 +208,7 @@ def fit_model(sim: Simulator, space: Space, effects: Sequence[str], fit_data: Da
                        corr=emulator_correlation(noise, emu, fit_data, k))
     for r in range(refine):
         Ul = local_design(space, fit.u, 0.15 / 2 ** r, 2 * space.dim + 2, seed=r + 1, relaxing=relaxing)
-        _, Yl, SEl, Vl = simulate_design(sim, space, fit_data, fit_seeds, U=Ul)
+        _, Yl, SEl, Vl = simulate_design(sim, space, fit_data, fit_seeds, U=Ul, errors=errors)
         UV.append(Ul)
         VV.append(Vl)
         U, Y, SE = np.vstack([U, Ul]), np.vstack([Y, Yl]), np.vstack([SE, SEl])
@@ -235,6 +242,8 @@ def fit_model(sim: Simulator, space: Space, effects: Sequence[str], fit_data: Da
         f"{fit.chi2_per_point:.2f} at " + ", ".join(f"{k} = {fit.params[k]:.4g}" for k in space.names)
         + f"; fresh packings: chi2/n {chi2_of(mf.z_check_fit) / len(fit_data):.2f} fit"
         + (f", {chi2_of(z_held) / len(heldout):.2f} held out" if heldout is not None else ""))
+    if errors:
+        log(f"{name}: the first failed design point: {errors[0]}")
     return mf
 
 
