@@ -154,8 +154,9 @@ def _materials(args) -> list:
 
 
 def _problem(args):
-    """(dataset, held_out, bounds, start, bond, settings, preset, subject) of the run; subject:
-    what the data are, for the report's title."""
+    """(dataset, held_out, bounds, start, bond, settings, preset, subject, particle density) of
+    the run; subject: what the data are, for the report's title; particle density: {material:
+    kg/m^3} (None: the preset's for every material)."""
     from .engine import BondLaw
     from .law_settings import parse_settings
 
@@ -165,20 +166,20 @@ def _problem(args):
         conds, held, _ = synthetic_design(truth, args.draw)
         subject = f"synthetic data ({'hidden: ' + args.synthetic if truth else 'control'})"
         return (conds, truth), held, dict(SYNTHETIC_BOUNDS), None, BondLaw(**SYNTHETIC_BOND), settings, \
-            args.preset or "tiny", subject
+            args.preset or "tiny", subject, None
     if args.data == "paper":
-        from .loop_paper import DEFAULT_HELD_OUT, paper_problem
+        from .loop_paper import DEFAULT_HELD_OUT, paper_problem, particle_densities
 
         data, held, bounds = paper_problem(_materials(args), args.held_out or DEFAULT_HELD_OUT, args.fit)
         return data, held, bounds, None, BondLaw(), settings, args.preset or "tiny", \
-            "the paper's measurements"
+            "the paper's measurements", particle_densities(_materials(args))
     from .loop_manifest import example_manifest, load_manifest
 
     m = load_manifest(example_manifest() if args.data == "example" else args.data)
     for k, v in m.settings.items():
         settings.setdefault(k, v)  # the command line's --set wins
     return m.dataset, m.held_out, m.bounds, None, BondLaw(), settings, args.preset or m.preset, \
-        str(m.name)
+        str(m.name), m.particle_density or None
 
 
 def _executor(args):
@@ -200,7 +201,7 @@ def run(args, title: str = "Discrepancy loop on") -> int:
     from .loop_simulators import refuse_condition_rows
 
     _check(args)
-    data, held, bounds, start, bond, settings, preset, subject = _problem(args)  # a bad file fails here
+    data, held, bounds, start, bond, settings, preset, subject, density = _problem(args)  # a bad file fails here
     refuse_condition_rows(settings, "a manifest's setting")
     t0 = time.perf_counter()
     os.makedirs(args.out, exist_ok=True)
@@ -215,11 +216,6 @@ def run(args, title: str = "Discrepancy loop on") -> int:
             log.flush()
 
         client = _executor(args)
-        density = None
-        if args.data == "paper":
-            from .loop_paper import particle_densities
-
-            density = particle_densities(_materials(args))
         with loop.EngineSimulator(preset, bond=bond, contact=contact, seeds=tuple(range(args.packings)),
                                   max_dLD=args.window, executor=client, max_workers=args.workers,
                                   cache_dir=cache, relaxed_dir=os.path.join(cache, "relaxed"),

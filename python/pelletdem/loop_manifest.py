@@ -13,6 +13,7 @@ out of the fit::
     [model]                     # optional
     preset = "tiny"
     set = { "contact.mu" = 0.5 }   # law parameters, checked against the laws' tables
+    particle_density = { oak = 675.0 }   # kg/m^3 per material (default the preset's)
 
     [[condition]]
     pressure_mpa = 120          # may instead come from the curve files' "# pressure_mpa=120" header
@@ -75,8 +76,9 @@ class ManifestError(ValueError):
 @dataclass
 class Manifest:
     """A loaded manifest: the ``dataset`` (all conditions), the ``held_out`` conditions, the
-    base parameters' ``bounds`` (SI), law ``settings`` ({'contact.X': v}), the ``preset`` name
-    and the data's ``name``."""
+    base parameters' ``bounds`` (SI), law ``settings`` ({'contact.X': v}), the ``preset`` name,
+    the data's ``name`` and the particles' density per material, kg/m^3
+    (``particle_density``; a material not listed keeps the preset's)."""
 
     dataset: Dataset
     held_out: Tuple[Condition, ...]
@@ -84,6 +86,7 @@ class Manifest:
     settings: Dict[str, object] = field(default_factory=dict)
     preset: str = "tiny"
     name: str = "data"
+    particle_density: Dict[str, float] = field(default_factory=dict)
 
 
 def example_manifest() -> str:
@@ -228,7 +231,7 @@ def load_manifest(path) -> Manifest:
         if k not in _TOP:
             raise ManifestError(path, f"unknown top-level key; allowed {sorted(_TOP)}", lines.key(k), k)
     bounds = _bounds(doc, lines, path)
-    settings, preset = _model(doc, lines, path)
+    settings, preset, density = _model(doc, lines, path)
     conds = doc.get("condition", [])
     if not isinstance(conds, list) or not conds:
         raise ManifestError(path, "no [[condition]] tables: the manifest lists no measurements",
@@ -254,7 +257,13 @@ def load_manifest(path) -> Manifest:
     if len(held) == len(ds.conditions):
         raise ManifestError(path, "every condition is held out: nothing is left to fit",
                             lines.key("held_out", index=len(conds) - 1), "held_out")
-    return Manifest(ds, tuple(held), bounds, settings, preset, str(name))
+    materials = {c.material for c in ds.conditions}
+    for m in density:
+        if m not in materials:
+            raise ManifestError(path, f"no condition is of material {m!r}; the conditions' materials: "
+                                f"{sorted(materials)}", lines.key("particle_density", "model"),
+                                f"model.particle_density.{m}")
+    return Manifest(ds, tuple(held), bounds, settings, preset, str(name), density)
 
 
 def _bounds(doc, lines: _Lines, path: str) -> Dict[str, Tuple[float, float]]:
@@ -281,16 +290,18 @@ def _bounds(doc, lines: _Lines, path: str) -> Dict[str, Tuple[float, float]]:
     return bounds
 
 
-def _model(doc, lines: _Lines, path: str) -> Tuple[Dict[str, object], str]:
-    """(law settings, preset) of the [model] table."""
+def _model(doc, lines: _Lines, path: str) -> Tuple[Dict[str, object], str, Dict[str, float]]:
+    """(law settings, preset, particle density per material kg/m^3) of the [model] table."""
     model = doc.get("model", {})
     if not isinstance(model, dict):
-        raise ManifestError(path, "[model] must be a table (preset, set)", lines.key("model"), "model")
+        raise ManifestError(path, "[model] must be a table (preset, set, particle_density)", lines.key("model"),
+                            "model")
     from .law_settings import parse_setting
 
     for k in model:
-        if k not in ("preset", "set"):
-            raise ManifestError(path, "allowed keys: preset, set", lines.key(k, "model"), f"model.{k}")
+        if k not in ("preset", "set", "particle_density"):
+            raise ManifestError(path, "allowed keys: preset, set, particle_density", lines.key(k, "model"),
+                                f"model.{k}")
     preset = model.get("preset", "tiny")
     if preset not in ("tiny", "quick", "paper"):
         raise ManifestError(path, "allowed presets: tiny, quick, paper", lines.key("preset", "model"), "model.preset")
@@ -306,7 +317,13 @@ def _model(doc, lines: _Lines, path: str) -> Tuple[Dict[str, object], str]:
             line = lines.key("set", "model") or lines.key(k, "model.set")  # inline, or a [model.set] table
             raise ManifestError(path, str(e).removeprefix("--set "), line, f"model.set.{k}") from None
         settings[name] = val
-    return settings, str(preset)
+    rho = model.get("particle_density", {})
+    line = lines.key("particle_density", "model")
+    if not isinstance(rho, dict):
+        raise ManifestError(path, "expected a table of material = kg/m^3, e.g. { oak = 675.0 }", line,
+                            "model.particle_density")
+    density = {str(m): _number(v, path, line, f"model.particle_density.{m}", 1.0, 3.0e4) for m, v in rho.items()}
+    return settings, str(preset), density
 
 
 def _flat(d: dict, prefix: str = "") -> dict:

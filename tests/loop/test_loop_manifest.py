@@ -120,7 +120,7 @@ def test_loop_data_example_is_the_shipped_manifest():
     sub = argparse.ArgumentParser().add_subparsers()
     loop_cli.add_parser(sub)
     args = sub.choices["loop"].parse_args(["--data", "example", "--out", "unused"])
-    data, held, bounds, _, _, _, preset, title = loop_cli._problem(args)
+    data, held, bounds, _, _, _, preset, title, density = loop_cli._problem(args)
     m = load_manifest(example_manifest())
     assert _keys(data.observations) == _keys(m.dataset.observations) and held == m.held_out
     assert bounds == m.bounds and preset == "tiny" and m.name in title
@@ -186,6 +186,7 @@ def test_a_manifest_of_curves_and_scalars_loads(tmp_path):
         [model]
         preset = "quick"
         set = {{ "contact.mu" = 0.4 }}
+        particle_density = {{ oak = 675.0 }}
         [[condition]]
         diametral = "{d}"
         compaction = "{c}"
@@ -199,11 +200,30 @@ def test_a_manifest_of_curves_and_scalars_loads(tmp_path):
         """)
     m = load_manifest(path)
     assert m.name == "mine" and m.preset == "quick" and m.settings == {"contact.mu": 0.4}
+    assert m.particle_density == {"oak": 675.0}
     assert m.bounds == {"E_b[oak]": (1e7, 1e9), "sigma_c": (1e6, 1e8)}
     assert m.dataset.conditions == [Condition(120e6, 8.0, "oak"), Condition(60e6, 10.0, "oak")]
     assert m.held_out == (Condition(60e6, 10.0, "oak"),)
     sf = [o for o in m.dataset.observations if o.condition.sigma_z == 60e6]
     assert [(o.quantity, o.value, o.sd, o.n) for o in sf] == [("sigma_f", 5e5, 5e4, 1)]  # n defaults to 1
+
+
+@pytest.mark.parametrize("table,match", [
+    ("{ oak = -5.0 }", "must be a number in"),
+    ("{ oak = true }", "must be a number in"),
+    ("{ pine = 510.0 }", "no condition is of material 'pine'"),
+])
+def test_a_bad_particle_density_names_its_line(tmp_path, table, match):
+    path = _manifest(tmp_path, f"""
+        [model]
+        particle_density = {table}
+        [[condition]]
+        pressure_mpa = 120
+        material = "oak"
+        bulk_density = {{ mean = 1000.0, sd = 10.0, n = 5 }}
+        """)
+    field = "model.particle_density." + table.split()[1]
+    _refused(path, _line(path, "particle_density"), field, match)
 
 
 def test_missing_pressure(tmp_path):
