@@ -166,10 +166,12 @@ def local_design(space: Space, u: np.ndarray, half_width: float, n: int, seed: i
     return np.vstack([u[None, :], share_relaxations(pts[:n], relaxing)])
 
 
-def _emulate(space: Space, U, Y, SE, name: str, warm: Optional[Emulator] = None) -> Emulator:
+def _emulate(space: Space, U, Y, SE, name: str, warm: Optional[Emulator] = None,
+             errors: Sequence[str] = ()) -> Emulator:
     ok = np.all(np.isfinite(Y), axis=1)
     if not ok.any():
-        raise RuntimeError(f"{name}: every design point's simulation failed")
+        raise RuntimeError(f"{name}: every design point's simulation failed"
+                           + (f" (the first: {errors[0]})" if errors else ""))
     return Emulator(space, U[ok], Y[ok], SE[ok], warm)
 
 
@@ -203,7 +205,7 @@ def fit_model(sim: Simulator, space: Space, effects: Sequence[str], fit_data: Da
     noise = PackingNoise.independent() if noise is None else noise
     if shared is not None:
         U, Y, SE = np.vstack([U, shared[0]]), np.vstack([Y, shared[1]]), np.vstack([SE, shared[2]])
-    emu = _emulate(space, U, Y, SE, name)
+    emu = _emulate(space, U, Y, SE, name, errors=errors)
     fit = fit_emulated(emu, fit_data, space.unit(start) if start else None,
                        corr=emulator_correlation(noise, emu, fit_data, k))
     for r in range(refine):
@@ -212,7 +214,7 @@ def fit_model(sim: Simulator, space: Space, effects: Sequence[str], fit_data: Da
         UV.append(Ul)
         VV.append(Vl)
         U, Y, SE = np.vstack([U, Ul]), np.vstack([Y, Yl]), np.vstack([SE, SEl])
-        emu = _emulate(space, U, Y, SE, name, emu)
+        emu = _emulate(space, U, Y, SE, name, emu, errors)
         new = fit_emulated(emu, fit_data, fit.u, corr=emulator_correlation(noise, emu, fit_data, k))
         moved = float(np.max(np.abs(new.u - fit.u)))
         log(f"{name}: refinement {r + 1} ({len(U)} points), the fit moved {moved:.3f} of the box")

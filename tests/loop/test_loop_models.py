@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from pelletdem.loop import Condition, Dataset, FunctionSimulator, Prediction
 from pelletdem.loop_box import Axis, Space
@@ -38,3 +39,9 @@ def test_the_fit_says_why_its_design_points_failed():
     assert failed and " 0 failed" not in failed[0]
     why = [s for s in lines if "the first failed design point" in s]
     assert len(why) == 1 and "OverlapError" in why[0] and "E_b = " in why[0]
+
+
+def test_a_fit_whose_every_point_failed_says_why():
+    sim = FunctionSimulator(lambda p, c, s: Prediction(ok=False, error="OverlapError: at 120 MPa"), (0, 1))
+    with pytest.raises(RuntimeError, match=r"every design point's simulation failed \(the first: E_b = .*OverlapError"):
+        fit_model(sim, SPACE, (), DATA, None, (0, 1), (10, 11), n_design=6, refine=0)
