@@ -168,10 +168,10 @@ def _problem(args):
         return (conds, truth), held, dict(SYNTHETIC_BOUNDS), None, BondLaw(**SYNTHETIC_BOND), settings, \
             args.preset or "tiny", subject, None
     if args.data == "paper":
-        from .loop_paper import DEFAULT_HELD_OUT, paper_problem, particle_densities
+        from .loop_paper import DEFAULT_HELD_OUT, paper_preset, paper_problem, particle_densities
 
         data, held, bounds = paper_problem(_materials(args), args.held_out or DEFAULT_HELD_OUT, args.fit)
-        return data, held, bounds, None, BondLaw(), settings, args.preset or "tiny", \
+        return data, held, bounds, None, BondLaw(), settings, paper_preset(args.preset or "tiny"), \
             "the paper's measurements", particle_densities(_materials(args))
     from .loop_manifest import example_manifest, load_manifest
 
@@ -234,8 +234,9 @@ def run(args, title: str = "Discrepancy loop on") -> int:
             client.close()
         report = write_report(res, args.out, f"{title} {subject}")
         out = summary(res)
-        out.update({"preset": preset, "packings": args.packings, "hidden": args.synthetic, "draw": args.draw,
-                    "data": args.data, "report": report, "total_wall_time_s": round(time.perf_counter() - t0, 1)})
+        out.update({"preset": getattr(preset, "name", preset), "packings": args.packings, "hidden": args.synthetic,
+                    "draw": args.draw, "data": args.data, "report": report,
+                    "total_wall_time_s": round(time.perf_counter() - t0, 1)})
         with open(os.path.join(args.out, "loop.json"), "w") as fh:
             json.dump(_plain(out), fh, indent=2)
         say(res.table())

@@ -111,3 +111,16 @@ def test_each_material_s_particles_have_its_wood_s_density():
     assert rho["oak"] == pytest.approx(get_preset("tiny").density, rel=0.01)
     with pytest.raises(ValueError, match="spruce"):
         particle_densities(["spruce"])
+
+
+def test_the_paper_s_pellets_run_with_the_wider_overlap_guard():
+    from pelletdem.loop_paper import PAPER_OVERLAP_GUARD, paper_preset
+    from pelletdem.presets import get_preset
+
+    args = _args("--data", "paper", "--preset", "quick")
+    preset = loop_cli._problem(args)[6]
+    assert preset.max_overlap_ratio == PAPER_OVERLAP_GUARD == 2.0
+    assert preset == get_preset("quick").with_(max_overlap_ratio=2.0)
+    assert paper_preset("tiny").n_particles == get_preset("tiny").n_particles
+    # other data keep the preset's own guard
+    assert loop_cli._problem(_args("--synthetic", "none"))[6] == "tiny"
