@@ -21,6 +21,7 @@ import json
 import math
 import os
 import time
+from typing import Any, NamedTuple, Optional
 
 from .loop_synthetic import DATA_SEEDS
 
@@ -153,10 +154,26 @@ def _materials(args) -> list:
     return [m.strip() for m in args.materials.split(",") if m.strip()]
 
 
-def _problem(args):
-    """(dataset, held_out, bounds, start, bond, settings, preset, subject, particle density) of
-    the run; subject: what the data are, for the report's title; particle density: {material:
-    kg/m^3} (None: the preset's for every material)."""
+class _Problem(NamedTuple):
+    """What a loop runs on: ``data`` (a Dataset, or (conditions, truth) for synthetic data made
+    in the run), the ``held`` conditions, the base parameters' ``bounds`` (SI), a ``start``,
+    the base ``bond`` law, law ``settings``, the ``preset`` (name or Preset), the ``subject``
+    (what the data are, for the report's title) and the ``density`` of the particles per
+    material, kg/m^3 (None: the preset's for every material)."""
+
+    data: Any
+    held: tuple
+    bounds: dict
+    start: Optional[dict]
+    bond: Any
+    settings: dict
+    preset: Any
+    subject: str
+    density: Optional[dict]
+
+
+def _problem(args) -> _Problem:
+    """The :class:`_Problem` of the parsed ``args``."""
     from .engine import BondLaw
     from .law_settings import parse_settings
 
@@ -165,21 +182,21 @@ def _problem(args):
         truth = synthetic_truth(args.synthetic)
         conds, held, _ = synthetic_design(truth, args.draw)
         subject = f"synthetic data ({'hidden: ' + args.synthetic if truth else 'control'})"
-        return (conds, truth), held, dict(SYNTHETIC_BOUNDS), None, BondLaw(**SYNTHETIC_BOND), settings, \
-            args.preset or "tiny", subject, None
+        return _Problem((conds, truth), held, dict(SYNTHETIC_BOUNDS), None, BondLaw(**SYNTHETIC_BOND), settings,
+                        args.preset or "tiny", subject, None)
     if args.data == "paper":
         from .loop_paper import DEFAULT_HELD_OUT, paper_preset, paper_problem, particle_densities
 
         data, held, bounds = paper_problem(_materials(args), args.held_out or DEFAULT_HELD_OUT, args.fit)
-        return data, held, bounds, None, BondLaw(), settings, paper_preset(args.preset or "tiny"), \
-            "the paper's measurements", particle_densities(_materials(args))
+        return _Problem(data, held, bounds, None, BondLaw(), settings, paper_preset(args.preset or "tiny"),
+                        "the paper's measurements", particle_densities(_materials(args)))
     from .loop_manifest import example_manifest, load_manifest
 
     m = load_manifest(example_manifest() if args.data == "example" else args.data)
     for k, v in m.settings.items():
         settings.setdefault(k, v)  # the command line's --set wins
-    return m.dataset, m.held_out, m.bounds, None, BondLaw(), settings, args.preset or m.preset, \
-        str(m.name), m.particle_density or None
+    return _Problem(m.dataset, m.held_out, m.bounds, None, BondLaw(), settings, args.preset or m.preset,
+                    str(m.name), m.particle_density or None)
 
 
 def _executor(args):
