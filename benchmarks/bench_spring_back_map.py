@@ -53,9 +53,10 @@ def main() -> None:
     ap.add_argument("--seeds", default="0,1")
     ap.add_argument("--workers", type=int, default=2)
     a = ap.parse_args()
-    for name, vals, lo in (("k1", _floats(a.k1), 0.0), ("kp", _floats(a.kp), 1.0)):
-        if not vals or any(not v >= lo for v in vals) or (name == "k1" and 0.0 in vals):
-            raise SystemExit(f"--{name}: allowed a comma list of numbers {'> 0' if name == 'k1' else '>= 1'}")
+    if not _floats(a.k1) or any(not v > 0.0 for v in _floats(a.k1)):
+        raise SystemExit("--k1: allowed a comma list of numbers > 0 (N/m)")
+    if not _floats(a.kp) or any(not v >= 1.0 for v in _floats(a.kp)):
+        raise SystemExit("--kp: allowed a comma list of numbers >= 1")
     if not 1 <= a.workers <= 64:
         raise SystemExit(f"--workers = {a.workers}: allowed 1..64")
     grid = [(a.preset, k1, kp, mpa, int(s)) for k1, kp, mpa, s in itertools.product(

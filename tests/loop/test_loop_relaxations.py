@@ -102,3 +102,17 @@ def test_a_material_s_particle_density_scales_its_bulk_density_and_shares_the_re
     for bad in (0.0, -5.0, float("nan"), "heavy"):
         with pytest.raises(ValueError, match=r"particle_density\[pine\]"):
             EngineSimulator("tiny", particle_density={"pine": bad})
+
+
+def test_the_engine_s_predictions_carry_each_material_s_density():
+    from pelletdem.loop import Condition, EngineSimulator
+
+    oak, birch = Condition(120e6, 8.0, "oak"), Condition(120e6, 8.0, "birch")
+    with EngineSimulator("tiny", particle_density={"birch": 550.0}) as sim:
+        # the engine's records, stood in for: every pellet relaxes to 500 kg/m^3 at the preset's density
+        sim.evaluator.run_all = lambda specs: [{"ok": True, "outputs": {"bulk_density_relaxed": 500.0}}
+                                               for _ in specs]
+        ens = sim.predict({"E_b": 6e7, "sigma_c": 9e6}, [oak, birch], seeds=(0, 1))
+        rho = sim.setup.preset.density
+    assert ens[oak].scalar("bulk_density") == 500.0
+    assert ens[birch].scalar("bulk_density") == pytest.approx(500.0 * 550.0 / rho)
