@@ -115,10 +115,15 @@ def diametral_part(x: float, x_f: float) -> str:
 
 @dataclass
 class Dataset:
-    """Observations, in a fixed order, with the conditions they cover."""
+    """Observations, in a fixed order, with the conditions they cover. ``same_packings``:
+    groups of conditions whose replicates are the same packings (synthetic pellets pressed
+    from one fill to each pressure), so that one packing's luck runs through all of a group;
+    a laboratory's pellets of different conditions are other pellets, and no condition is
+    grouped (the default)."""
 
     observations: List[Observation]
     name: str = "data"
+    same_packings: Tuple[Tuple[Condition, ...], ...] = ()
 
     def __post_init__(self):
         self.observations = list(self.observations)
@@ -127,6 +132,20 @@ class Dataset:
         for o in self.observations:
             if not isinstance(o, Observation):
                 raise ValueError(f"observations must be Observation objects, got {type(o).__name__}")
+        conds = set(self.conditions)
+        groups = []
+        for g in self.same_packings:
+            g = tuple(c for c in dict.fromkeys(g) if c in conds)  # a subset keeps what it still holds
+            if len(g) >= 2:
+                groups.append(g)
+        seen = [c for g in groups for c in g]
+        if len(seen) != len(set(seen)):
+            raise ValueError("same_packings: a condition is in more than one group")
+        self.same_packings = tuple(groups)
+
+    def packings_shared(self, a: Condition, b: Condition) -> bool:
+        """Whether the replicates of conditions ``a`` and ``b`` are the same packings."""
+        return a == b or any(a in g and b in g for g in self.same_packings)
 
     def __len__(self) -> int:
         return len(self.observations)
@@ -161,7 +180,7 @@ class Dataset:
         obs = [o for o in self.observations if keep(o)]
         if not obs:
             raise ValueError("the subset is empty")
-        return Dataset(obs, name or self.name)
+        return Dataset(obs, name or self.name, self.same_packings)
 
     def split(self, held_out: Callable[[Condition], bool]) -> Tuple["Dataset", Optional["Dataset"]]:
         """(fit, held-out): observations of conditions for which ``held_out(condition)`` is
@@ -170,7 +189,8 @@ class Dataset:
         held = [o for o in self.observations if held_out(o.condition)]
         if not fit:
             raise ValueError("every condition is held out: nothing is left to fit")
-        return Dataset(fit, self.name + " (fit)"), (Dataset(held, self.name + " (held out)") if held else None)
+        return (Dataset(fit, self.name + " (fit)", self.same_packings),
+                Dataset(held, self.name + " (held out)", self.same_packings) if held else None)
 
     @classmethod
     def from_paper(cls, materials: Optional[Sequence[str]] = None,

@@ -11,15 +11,21 @@ from a model's design: at every design point the same k packings were simulated,
 deviations of each packing from its point's mean, pooled over the points near the fit (on log
 values for positive numbers), sample that correlation with (points x (k - 1)) degrees of
 freedom. Within a condition it is modelled by one common factor (the packing's luck) with a
-loading per observation, which tens of degrees of freedom estimate well; between conditions
-the model's shared packings are not relied on. Conditions the design did
+loading per observation, which tens of degrees of freedom estimate well. Between conditions
+the model's packings are shared too (each condition presses the same fills), and a fill that
+comes out dense is dense at every pressure: the compaction curves of one fill pressed to 60
+and to 120 MPa are one curve up to 60 MPa. That correlation is kept as sampled, each
+coefficient shrunk towards zero by its own sampling error (1 / sqrt(dof)), and the whole
+matrix made a valid correlation (:func:`_valid_correlation`). Conditions the design did
 not simulate (held out) borrow the correlation of the nearest fit condition, observation by
-observation (same quantity, nearest position along its curve).
+observation (same quantity, nearest position along its curve), and are tied to no other.
 
 :meth:`PackingNoise.covariance` combines it with the data's own standard errors into the
 covariance of each difference model - data: the model's part follows the packings'
-correlation within a condition; the data's part too, up to the model's packing variance, and
-what of the data's variance exceeds that (measurement noise) stays independent. The fits use
+correlation within and between conditions; the data's part too, up to the model's packing
+variance, within a condition and between conditions whose replicates are the same packings
+(``Dataset.same_packings``: a laboratory's are other pellets), and what of the data's
+variance exceeds that (measurement noise) stays independent. The fits use
 the resulting correlation of the misfits only linearly, in sandwich standard errors
 (:mod:`pelletdem.loop_fit`), never inverted: inverted, the noise of a correlation estimated
 from tens of packings is amplified (on the engine's pellets it tripled the chi2 of the truth).
@@ -27,7 +33,7 @@ from tens of packings is amplified (on the engine's pellets it tripled the chi2 
 from __future__ import annotations
 
 import math
-from typing import Dict, List, Optional, Sequence, Tuple
+from typing import Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -45,13 +51,17 @@ def observation_key(o: Observation) -> Key:
 
 class PackingNoise:
     """The correlation (-) of the packings' scatter between the observations ``keys`` (see the
-    module docstring): ``corr``, an (m, m) matrix, estimated with ``dof`` degrees of freedom
+    module docstring): ``corr``, an (m, m) matrix within conditions (zero between them), and
+    ``shared``, the (m, m) correlation within and between conditions where every condition
+    presses the same packings (default ``corr``), estimated with ``dof`` degrees of freedom
     (0 for the independent model)."""
 
-    def __init__(self, keys: Sequence[Key], corr: np.ndarray, dof: float = 0.0):
+    def __init__(self, keys: Sequence[Key], corr: np.ndarray, dof: float = 0.0,
+                 shared: Optional[np.ndarray] = None):
         self.keys = tuple(keys)
         m = len(self.keys)
         self.corr = np.asarray(corr, float).reshape(m, m)
+        self.shared = self.corr.copy() if shared is None else np.asarray(shared, float).reshape(m, m)
         self.dof = float(dof)
         self._index = {k: i for i, k in enumerate(self.keys)}
 
@@ -95,7 +105,12 @@ class PackingNoise:
             idx = np.array([i for i in range(m) if conds[i] == c and varying[i]], int)
             if len(idx) >= 2:
                 corr[np.ix_(idx, idx)] = _one_factor(sample[np.ix_(idx, idx)])
-        return cls([observation_key(o) for o in data.observations], corr, dof)
+        cid = {c: k for k, c in enumerate(dict.fromkeys(conds))}
+        c_arr = np.array([cid[c] for c in conds])
+        between = (c_arr[:, None] != c_arr[None, :]) & varying[:, None] & varying[None, :]
+        shrunk = sample * np.clip(1.0 - (1.0 / dof) / np.maximum(sample * sample, 1e-300), 0.0, 1.0)
+        shared = _valid_correlation(np.where(between, shrunk, corr))
+        return cls([observation_key(o) for o in data.observations], corr, dof, shared)
 
     def _mapping(self, data: Dataset) -> List[Optional[int]]:
         """Each observation of ``data`` as an index into :attr:`keys` (None: no counterpart)."""
@@ -131,19 +146,40 @@ class PackingNoise:
             out.append(pick)
         return out
 
-    def correlation(self, data: Dataset) -> np.ndarray:
+    def correlation(self, data: Dataset,
+                    shared: Optional[Callable[[Condition, Condition], bool]] = None) -> np.ndarray:
         """The packings' correlation between ``data``'s observations (-). Observations of
-        conditions the estimate never saw take their counterparts' correlation; between
-        conditions nothing is relied on (R = 0)."""
+        conditions the estimate never saw take their counterparts' correlation and are tied
+        to no other condition. Conditions the estimate saw that ``shared(a, b)`` links (as
+        groups: linked to a linked one is linked) take the sampled correlation within and
+        between them (:attr:`shared`); between any others nothing is relied on (R = 0).
+        Default: no two conditions share packings."""
         n = len(data)
         idx = self._mapping(data)
         conds = [o.condition for o in data.observations]
+        own = [a is not None and self.keys[a][0] == c for a, c in zip(idx, conds)]
+        group = {c: k for k, c in enumerate(dict.fromkeys(conds))}
+        if shared is not None:
+            seen = [c for c, ok in zip(conds, own) if ok]
+            for a in dict.fromkeys(seen):
+                for b in dict.fromkeys(seen):
+                    if group[a] != group[b] and shared(a, b):
+                        old = group[b]
+                        group = {c: (group[a] if g == old else g) for c, g in group.items()}
+        members = {}
+        for c, ok in zip(conds, own):
+            if ok:
+                members.setdefault(group[c], set()).add(c)
         R = np.eye(n)
         for i in range(n):
             for j in range(i + 1, n):
                 a, b = idx[i], idx[j]
-                if (a is not None and b is not None and a != b and conds[i] == conds[j]
-                        and self.keys[a][0] == self.keys[b][0]):
+                if a is None or b is None or a == b:
+                    continue
+                # a whole group takes its principal block of the valid matrix `shared`
+                if own[i] and own[j] and group[conds[i]] == group[conds[j]] and len(members[group[conds[i]]]) > 1:
+                    R[i, j] = R[j, i] = self.shared[a, b]
+                elif conds[i] == conds[j] and self.keys[a][0] == self.keys[b][0]:
                     R[i, j] = R[j, i] = self.corr[a, b]
         return R
 
@@ -152,15 +188,17 @@ class PackingNoise:
         ``data``'s observations, against a model whose means carry the standard errors
         ``model_se`` (per observation), one pellet's packing scatter being ``model_sd``
         (default: the data's replicate SD). The data's replicate variance up to the model's
-        packing variance is correlated within a condition; the rest of it (measurement noise)
-        is independent."""
-        R = self.correlation(data)
+        packing variance is correlated within a condition, and between conditions whose
+        replicates are the same packings (``data.same_packings``); the rest of it (measurement
+        noise) is independent. The model's packings are the same in every condition."""
+        R = self.correlation(data, data.packings_shared)
+        R_model = self.correlation(data, lambda a, b: True)
         m = np.nan_to_num(np.asarray(model_se, float))
         sd, n = data.sds, np.array([o.n for o in data.observations], float)
         pack = sd if model_sd is None else np.minimum(np.nan_to_num(np.asarray(model_sd, float)), sd)
         c = pack / np.sqrt(n)                                   # the data's packing part of its SE
         e2 = np.maximum(data.standard_errors ** 2 - c * c, 0.0)  # and the independent rest
-        return np.outer(c, c) * R + np.diag(e2) + np.outer(m, m) * R
+        return np.outer(c, c) * R + np.diag(e2) + np.outer(m, m) * R_model
 
     def misfit_correlation(self, data: Dataset, model_se: np.ndarray,
                            model_sd: Optional[np.ndarray] = None) -> np.ndarray:
@@ -202,3 +240,14 @@ def _one_factor(sample: np.ndarray) -> np.ndarray:
     return R
 
 
+def _valid_correlation(R: np.ndarray) -> np.ndarray:
+    """The symmetric matrix ``R`` (unit diagonal) made a valid correlation: its negative
+    eigenvalues (which blocks estimated apart, or coefficients shrunk apart, can leave) set
+    to zero and the diagonal brought back to one."""
+    R = 0.5 * (R + R.T)
+    w, Q = np.linalg.eigh(R)
+    P = (Q * np.maximum(w, 0.0)) @ Q.T
+    d = np.sqrt(np.maximum(np.diag(P), 1e-300))
+    P = P / np.outer(d, d)
+    np.fill_diagonal(P, 1.0)
+    return P

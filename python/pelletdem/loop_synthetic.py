@@ -11,7 +11,7 @@ optionally, sigma_z along the compaction curve. Nothing in the dataset says what
 from __future__ import annotations
 
 import math
-from typing import Dict, Mapping, Sequence, Tuple, Union
+from typing import Dict, List, Mapping, Sequence, Tuple, Union
 
 import numpy as np
 
@@ -77,6 +77,16 @@ def _replicate_seeds(seeds, conditions: Sequence[Condition]) -> Dict[Condition, 
     return out
 
 
+def _same_packings(seeds: Mapping[Condition, Tuple[int, ...]]) -> Tuple[Tuple[Condition, ...], ...]:
+    """The groups of conditions whose replicates share a packing (linked through any seed)."""
+    groups: List[List[Condition]] = []
+    for c, s in seeds.items():
+        linked = [g for g in groups if any(set(s) & set(seeds[d]) for d in g)]
+        merged = [c] + [d for g in linked for d in g]
+        groups = [g for g in groups if g not in linked] + [merged]
+    return tuple(tuple(g) for g in groups if len(g) >= 2)
+
+
 def synthetic_dataset(sim: Simulator, truth: Mapping[str, float], conditions: Sequence[Condition], *,
                       seeds: Union[Sequence[int], Mapping[Condition, Sequence[int]]] = DATA_SEEDS,
                       noise: float = 0.02,
@@ -84,8 +94,9 @@ def synthetic_dataset(sim: Simulator, truth: Mapping[str, float], conditions: Se
                       compaction_points: int = 0, seed: int = 0, name: str = "synthetic") -> Dataset:
     """Data of ``conditions`` made by ``sim`` under ``truth`` (SI; it may switch on any
     effect, in the library or not): one replicate per packing of ``seeds`` (at least 2; one
-    sequence for every condition, or {condition: sequence} where each condition's pellets
-    must be other pellets, as a laboratory's are), each
+    sequence for every condition, or {condition: sequence}, where other packings make each
+    condition's pellets other pellets, as a laboratory's are; conditions sharing a packing
+    are recorded in the dataset's ``same_packings``), each
     number of each replicate times (1 + ``noise`` N(0, 1)) (``seed`` seeds that noise), then
     the replicates' mean, SD and count per number. A replicate that has not failed by the end
     of the diametral window is tested further where the simulator can widen its window (to
@@ -132,4 +143,4 @@ def synthetic_dataset(sim: Simulator, truth: Mapping[str, float], conditions: Se
                 vals = [m.scalars.get(q, math.nan) for m in members]
                 if all(math.isfinite(v) for v in vals):
                     measured(vals, quantity=q, cond=c)
-    return Dataset(obs, name)
+    return Dataset(obs, name, _same_packings(seeds))

@@ -108,3 +108,64 @@ def test_a_held_out_condition_borrows_the_nearest_fit_conditions_correlation():
     # an observation with no counterpart is independent of the rest
     odd = Dataset(_curve(C90, m=3) + [Observation(C90, "bulk_density", float("nan"), 500.0, 5.0, 5)])
     assert np.allclose(noise.correlation(odd)[3, :3], 0.0)
+
+
+def test_the_shared_packings_correlation_between_conditions_is_estimated():
+    """The design presses the same packings in every condition: a packing's luck runs
+    through both, and `shared` recovers that (within the conditions the one factor, between
+    them the sampled coefficients), while `corr` keeps the conditions apart."""
+    rng = np.random.default_rng(7)
+    data = Dataset(_curve(C60) + _curve(C120))
+    R = np.kron(np.array([[1.0, 0.8], [0.8, 1.0]]), _factor(LOADINGS))
+    np.fill_diagonal(R, 1.0)
+    noise = PackingNoise.estimate(data, _members(R, 0.05, 300, 4, rng))
+    assert np.allclose(noise.corr[:6, 6:], 0.0)
+    assert np.max(np.abs(noise.shared - R)) < 0.1
+    assert np.min(np.linalg.eigvalsh(noise.shared)) > -1e-9
+    assert np.allclose(np.diag(noise.shared), 1.0)
+    # unrelated conditions: the sampled coefficients shrink to (nearly) nothing
+    apart = PackingNoise.estimate(data, _members(np.kron(np.eye(2), _factor(LOADINGS)), 0.05, 300, 4, rng))
+    assert np.max(np.abs(apart.shared[:6, 6:])) < 0.1
+
+
+def test_the_model_part_is_shared_between_conditions_and_the_data_part_only_where_the_data_say_so():
+    data = Dataset(_curve(C60) + _curve(C120))
+    keys = [(o.condition, o.quantity, round(o.x, 12)) for o in data.observations]
+    F = _factor(LOADINGS)
+    shared = np.kron(np.array([[1.0, 0.8], [0.8, 1.0]]), F)
+    np.fill_diagonal(shared, 1.0)
+    noise = PackingNoise(keys, np.kron(np.eye(2), F), 1e3, shared)
+    assert np.allclose(noise.correlation(data)[:6, 6:], 0.0)
+    assert np.allclose(noise.correlation(data, lambda a, b: True), shared)
+    se = data.standard_errors
+    # a laboratory's data (other pellets per condition): only the model's part is tied
+    C = noise.covariance(data, se, data.sds)
+    assert np.allclose(C[:6, 6:], np.outer(se[:6], se[6:]) * shared[:6, 6:])
+    # synthetic data pressed from the same packings at both pressures: the data's part too
+    same = Dataset(data.observations, same_packings=((C60, C120),))
+    C2 = noise.covariance(same, se, same.sds)
+    assert np.allclose(C2[:6, 6:], 2.0 * np.outer(se[:6], se[6:]) * shared[:6, 6:])
+    assert np.allclose(C2[:6, :6], C[:6, :6]) and np.allclose(np.diag(C2), np.diag(C))
+    # a held-out condition borrows its counterpart's block and is tied to nothing else
+    held = Dataset(_curve(C60) + _curve(C90), same_packings=((C60, C90),))
+    Rh = noise.correlation(held, held.packings_shared)
+    assert np.allclose(Rh[:6, 6:], 0.0) and np.allclose(Rh[6:, 6:], F)
+
+
+def test_correlated_conditions_widen_a_shared_parameters_interval():
+    """Two conditions that measure one shift through the same packings are not two
+    independent measurements: the sandwich variance of the shift, with misfits correlated
+    r between the conditions, is (1 + r) / 2 of one condition's against 1 / 2 for
+    independent ones."""
+    data = Dataset([Observation(C60, "bulk_density", float("nan"), 600.0, 5.0, 5),
+                    Observation(C120, "bulk_density", float("nan"), 700.0, 5.0, 5)])
+    keys = [(o.condition, o.quantity, math.nan) for o in data.observations]
+    r = 0.7
+    noise = PackingNoise(keys, np.eye(2), 1e3, np.array([[1.0, r], [r, 1.0]]))
+    corr = noise.misfit_correlation(data, data.standard_errors, data.sds)
+    # equal data and model parts; the data's (other pellets) are independent between conditions
+    assert corr[0, 1] == pytest.approx(r / 2.0)
+    J = np.ones((2, 1))
+    plain = np.linalg.inv(J.T @ J)
+    sandwich = plain @ J.T @ corr @ J @ plain
+    assert float(sandwich[0, 0] / plain[0, 0]) == pytest.approx(1.0 + r / 2.0)
