@@ -135,6 +135,9 @@ class Dataset:
         conds = set(self.conditions)
         groups = []
         for g in self.same_packings:
+            iterable = hasattr(g, "__iter__") and not isinstance(g, (str, bytes))
+            if not iterable or not all(isinstance(c, Condition) for c in g):
+                raise ValueError(f"same_packings: each group must be a sequence of Conditions, got {g!r}")
             g = tuple(c for c in dict.fromkeys(g) if c in conds)  # a subset keeps what it still holds
             if len(g) >= 2:
                 groups.append(g)

@@ -84,7 +84,8 @@ def _same_packings(seeds: Mapping[Condition, Tuple[int, ...]]) -> Tuple[Tuple[Co
         linked = [g for g in groups if any(set(s) & set(seeds[d]) for d in g)]
         merged = [c] + [d for g in linked for d in g]
         groups = [g for g in groups if g not in linked] + [merged]
-    return tuple(tuple(g) for g in groups if len(g) >= 2)
+    order = {c: k for k, c in enumerate(seeds)}
+    return tuple(tuple(sorted(g, key=order.get)) for g in groups if len(g) >= 2)
 
 
 def synthetic_dataset(sim: Simulator, truth: Mapping[str, float], conditions: Sequence[Condition], *,

@@ -42,6 +42,21 @@ def test_split_keeps_the_held_out_conditions_apart():
         Dataset(obs).split(lambda c: True)
 
 
+def test_conditions_pressed_from_the_same_packings_stay_grouped_in_their_parts():
+    c60, c90, c120 = (Condition(s) for s in (60e6, 90e6, 120e6))
+    obs = [Observation(c, "sigma_f", math.nan, 1e6, 1e5, 5) for c in (c60, c90, c120)]
+    d = Dataset(obs, same_packings=((c60, c90, c120),))
+    assert d.packings_shared(c60, c120) and not Dataset(obs).packings_shared(c60, c120)
+    assert Dataset(obs).packings_shared(c60, c60)
+    fit, held = d.split(lambda c: c == c90)
+    assert fit.same_packings == ((c60, c120),) and held.same_packings == ()
+    assert d.subset(lambda o: o.condition == c60).same_packings == ()
+    with pytest.raises(ValueError, match="more than one group"):
+        Dataset(obs, same_packings=((c60, c90), (c90, c120)))
+    with pytest.raises(ValueError, match="same_packings: each group"):
+        Dataset(obs, same_packings=("60 MPa",))
+
+
 def test_paper_dataset_has_every_variant():
     d = Dataset.from_paper()
     assert len(d.conditions) == 12

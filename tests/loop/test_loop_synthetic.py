@@ -50,6 +50,11 @@ def test_each_condition_can_have_its_own_replicate_packings():
     d = synthetic_dataset(sim, TRUTH, FIT, seeds=seeds, noise=0.0)
     assert seen == {c: set(s) for c, s in seeds.items()}
     assert all(o.n == 3 for o in d.observations)
+    # other packings per condition are other pellets; one sequence for all is the same pellets
+    assert d.same_packings == ()
+    assert synthetic_dataset(sim, TRUTH, FIT, noise=0.0).same_packings == (tuple(FIT),)
+    linked = {FIT[0]: (1000, 1001), FIT[1]: (1001, 1002)}
+    assert set(synthetic_dataset(sim, TRUTH, FIT, seeds=linked, noise=0.0).same_packings[0]) == set(FIT)
 
 
 def test_a_moisture_effect_is_hidden_in_data_of_two_moisture_contents_from_other_pellets():
