@@ -65,6 +65,11 @@ class EmulatedFit:
     #: Per parameter, the sandwich variance over the plain one (>= 1): how much correlated
     #: misfits widen its interval, profile intervals included.
     widen: Dict[str, float] = field(default_factory=dict)
+    #: d z / d u at the optimum (observations x parameters), for errors taken afterwards.
+    jac: Optional[np.ndarray] = None
+    #: The fitted position's covariance over the fit packings left out in turn (unit box
+    #: squared, :mod:`pelletdem.loop_jackknife`); None when not measured.
+    jackknife: Optional[np.ndarray] = None
 
     def interval(self, name: str, k: float = 2.0) -> tuple:
         """(low, high) of parameter ``name`` (SI): where its profile's chi2 stays within k^2
@@ -170,7 +175,7 @@ def fit_emulated(emulator: Emulator, data: Dataset, start: Optional[Sequence[flo
         ok = np.isfinite(cov[k, k]) and np.isfinite(plain[k, k]) and plain[k, k] > 0
         widen[a.name] = max(1.0, float(cov[k, k] / plain[k, k])) if ok else 1.0
     return EmulatedFit(emulator.space.params(u), u, z, float(np.sum(z ** 2)), se, cov, len(z), relative,
-                       widen=widen)
+                       widen=widen, jac=J)
 
 
 def profile(emulator: Emulator, data: Dataset, fit: EmulatedFit, name: str, n: int = 41) -> EmulatedFit:

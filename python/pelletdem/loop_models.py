@@ -20,6 +20,7 @@ import numpy as np
 from .loop_data import Condition, Dataset
 from .loop_emulator import Emulator, Space, design
 from .loop_fit import EmulatedFit, fit_emulated, profile, welch_z
+from .loop_jackknife import packing_jackknife, with_packing_luck
 from .loop_noise import PackingNoise
 from .loop_simulators import Ensemble, Simulator
 
@@ -78,7 +79,10 @@ class ModelFit:
     check seeds (``check``), every condition; the misfit z-scores of the fit data on the fit
     seeds (``z_direct``) and on the check seeds (``z_check_fit``) and of the held-out data on
     the check seeds (``z_check_held``, None without held-out data); ``noise``: the packings'
-    correlation between observations (:mod:`pelletdem.loop_noise`) its errors allow for."""
+    correlation between observations (:mod:`pelletdem.loop_noise`) its errors allow for;
+    ``members``: each packing's prediction at the emulator's design points (points, packings,
+    observations), from which its errors measure what the fit owes to the fit packings
+    (:mod:`pelletdem.loop_jackknife`)."""
 
     effects: Tuple[str, ...]
     space: Space
@@ -90,6 +94,7 @@ class ModelFit:
     z_check_fit: np.ndarray
     z_check_held: Optional[np.ndarray]
     noise: PackingNoise
+    members: Optional[np.ndarray] = None
 
     @property
     def name(self) -> str:
@@ -179,7 +184,7 @@ def fit_model(sim: Simulator, space: Space, effects: Sequence[str], fit_data: Da
               heldout: Optional[Dataset], fit_seeds: Sequence[int], check_seeds: Sequence[int],
               start: Optional[Dict[str, float]] = None, n_design: Optional[int] = None,
               log: Callable[[str], None] = lambda s: None, refine: int = REFINE_ROUNDS,
-              shared: Optional[Tuple[np.ndarray, np.ndarray, np.ndarray]] = None,
+              shared: Optional[Tuple[np.ndarray, ...]] = None,
               noise: Optional[PackingNoise] = None) -> ModelFit:
     """Design, emulate, fit and check one model (see the module docstring). ``start``: a
     starting point (SI) for the fit; the design's best points are tried too. ``refine``: at
@@ -188,7 +193,8 @@ def fit_model(sim: Simulator, space: Space, effects: Sequence[str], fit_data: Da
     the richer emulator, until the fit moves less than 0.02 of the box. ``shared``: (U, Y, SE)
     already simulated in this box on the same packings (the nested model's design, its new
     axis at the strength that switches the effect off, :func:`nested_points`), which join
-    the emulator without being simulated again. ``noise``: the packings' correlation between
+    the emulator without being simulated again (and the packings' own predictions there, as a
+    fourth array, for the jackknife of :mod:`pelletdem.loop_jackknife`). ``noise``: the packings' correlation between
     the observations (:mod:`pelletdem.loop_noise`); None estimates it from this model's
     design (after the refinement, near the fit); a candidate takes its baseline's, so the
     two models' errors allow for the same correlation."""
@@ -203,8 +209,10 @@ def fit_model(sim: Simulator, space: Space, effects: Sequence[str], fit_data: Da
     k = len(fit_seeds)
     estimate = noise is None
     noise = PackingNoise.independent() if noise is None else noise
+    rows = [V]  # every emulator row's packings, in the emulator's order (None: not known)
     if shared is not None:
         U, Y, SE = np.vstack([U, shared[0]]), np.vstack([Y, shared[1]]), np.vstack([SE, shared[2]])
+        rows.append(shared[3] if len(shared) > 3 and shared[3] is not None else None)
     emu = _emulate(space, U, Y, SE, name, errors=errors)
     fit = fit_emulated(emu, fit_data, space.unit(start) if start else None,
                        corr=emulator_correlation(noise, emu, fit_data, k))
@@ -213,6 +221,7 @@ def fit_model(sim: Simulator, space: Space, effects: Sequence[str], fit_data: Da
         _, Yl, SEl, Vl = simulate_design(sim, space, fit_data, fit_seeds, U=Ul, errors=errors)
         UV.append(Ul)
         VV.append(Vl)
+        rows.append(Vl)
         U, Y, SE = np.vstack([U, Ul]), np.vstack([Y, Yl]), np.vstack([SE, SEl])
         emu = _emulate(space, U, Y, SE, name, emu, errors)
         new = fit_emulated(emu, fit_data, fit.u, corr=emulator_correlation(noise, emu, fit_data, k))
@@ -230,16 +239,26 @@ def fit_model(sim: Simulator, space: Space, effects: Sequence[str], fit_data: Da
         log(f"{name}: the packings' correlation between observations near the fit, from {noise.dof:.0f} degrees "
             f"of freedom (median |r| within a condition {_median_within(noise):.2f}): the parameters' variances "
             "widen by " + ", ".join(f"{fit.widen[a]:.2f}" for a in space.names))
+    failed = ~np.all(np.isfinite(Y), axis=1)
+    members = np.concatenate(rows)[~failed] if all(r is not None for r in rows) else None
+    if members is not None:
+        jack = packing_jackknife(emu, members, fit_data, fit.u)
+        before = np.diag(fit.cov).copy()
+        fit = with_packing_luck(fit, emu, fit_data, noise, k, jack)
+        if jack is not None:
+            log(f"{name}: fitted again leaving out each fit packing in turn: jackknife variance "
+                + ", ".join(f"{jack[i, i] / max(before[i], 1e-300):.2f}" for i in range(space.dim))
+                + " of the sandwich's; reported variances x "
+                + ", ".join(f"{c / max(b, 1e-300):.2f}" for c, b in zip(np.diag(fit.cov), before)))
     if effects:
         # the candidate's strength, added last
         profile(emu, fit_data, fit, space.names[-1])
-    failed = ~np.all(np.isfinite(Y), axis=1)
     conds = fit_data.conditions + (heldout.conditions if heldout is not None else [])
     direct = sim.predict(fit.params, conds, tuple(fit_seeds))
     check = sim.predict(fit.params, conds, tuple(check_seeds))
     z_held = ensemble_z(check, heldout) if heldout is not None else None
     mf = ModelFit(tuple(effects), space, emu, fit, direct, check, ensemble_z(direct, fit_data),
-                  ensemble_z(check, fit_data), z_held, noise)
+                  ensemble_z(check, fit_data), z_held, noise, members)
     log(f"{name}: {len(U)} design points ({int(failed.sum())} failed), emulated chi2/n "
         f"{fit.chi2_per_point:.2f} at " + ", ".join(f"{k} = {fit.params[k]:.4g}" for k in space.names)
         + f"; fresh packings: chi2/n {chi2_of(mf.z_check_fit) / len(fit_data):.2f} fit"
@@ -268,11 +287,12 @@ def _median_within(noise: PackingNoise) -> float:
     return float(np.median(pairs)) if pairs else 0.0
 
 
-def nested_points(mf: ModelFit, off_unit: float) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The design of ``mf`` (U, Y, SE) as points of a box with one more axis, at unit position
-    ``off_unit`` on it: the model with a candidate effect switched off is ``mf`` itself."""
+def nested_points(mf: ModelFit, off_unit: float) -> Tuple[np.ndarray, ...]:
+    """The design of ``mf`` (U, Y, SE, and each packing's predictions or None) as points of a
+    box with one more axis, at unit position ``off_unit`` on it: the model with a candidate
+    effect switched off is ``mf`` itself."""
     e = mf.emulator
-    return np.column_stack([e.U, np.full(len(e.U), float(off_unit))]), e.Y, e.SE
+    return np.column_stack([e.U, np.full(len(e.U), float(off_unit))]), e.Y, e.SE, mf.members
 
 
 def unit_jacobian(mf: ModelFit, fit_data: Dataset, h: float = 1e-3) -> np.ndarray:

@@ -191,6 +191,13 @@ class PackingNoise:
         packing variance is correlated within a condition, and between conditions whose
         replicates are the same packings (``data.same_packings``); the rest of it (measurement
         noise) is independent. The model's packings are the same in every condition."""
+        c_data, c_model = self.covariance_parts(data, model_se, model_sd)
+        return c_data + c_model
+
+    def covariance_parts(self, data: Dataset, model_se: np.ndarray,
+                         model_sd: Optional[np.ndarray] = None) -> Tuple[np.ndarray, np.ndarray]:
+        """(data's, model's) parts of :meth:`covariance` (same arguments and units): what the
+        measured means' scatter contributes, and what the model's own packings do."""
         R = self.correlation(data, data.packings_shared)
         R_model = self.correlation(data, lambda a, b: True)
         m = np.nan_to_num(np.asarray(model_se, float))
@@ -198,7 +205,7 @@ class PackingNoise:
         pack = sd if model_sd is None else np.minimum(np.nan_to_num(np.asarray(model_sd, float)), sd)
         c = pack / np.sqrt(n)                                   # the data's packing part of its SE
         e2 = np.maximum(data.standard_errors ** 2 - c * c, 0.0)  # and the independent rest
-        return np.outer(c, c) * R + np.diag(e2) + np.outer(m, m) * R_model
+        return np.outer(c, c) * R + np.diag(e2), np.outer(m, m) * R_model
 
     def misfit_correlation(self, data: Dataset, model_se: np.ndarray,
                            model_sd: Optional[np.ndarray] = None) -> np.ndarray:
