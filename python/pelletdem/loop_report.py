@@ -232,6 +232,8 @@ def summary(res: LoopResult) -> dict:
         return {"name": mf.name, "params": {k: mf.fit.params[k] for k in mf.space.names},
                 "se": {k: mf.fit.se.get(k) for k in mf.space.names},
                 "interval_2sigma": {k: list(mf.fit.interval(k, 2.0)) for k in mf.space.names},
+                "fit_packings_se": ({a.name: math.sqrt(max(float(mf.fit.jackknife[i, i]), 0.0)) * a.relative_scale()
+                                     for i, a in enumerate(mf.space.axes)} if mf.fit.jackknife is not None else None),
                 "emulated_chi2": mf.fit.chi2,
                 "design_points": int(len(mf.emulator.U))}
 
@@ -274,7 +276,8 @@ def write_report(res: LoopResult, out_dir: str, title: str = "Discrepancy loop")
     for k, st in enumerate(res.steps):
         widen = st.model.fit.widen
         shared = (" The errors allow for the misfits of one condition's observations being correlated (they share "
-                  "their pellets' packings): variances x" + ", x".join(f"{widen[a]:.2f}" for a in st.model.space.names)
+                  "their pellets' packings) and for the fit packings' own luck (the fit repeated leaving each out): "
+                  "variances x" + ", x".join(f"{widen[a]:.2f}" for a in st.model.space.names)
                   + ".") if widen and max(widen.values()) > 1.0 else ""
         L += [f"## Step {k + 1}: {st.model.name}", "", f"Fitted (emulated chi2 {st.model.fit.chi2:.1f} on "
               f"{st.model.fit.n} numbers, {len(st.model.emulator.U)} design points): {_params(st.model)}.{shared}",
