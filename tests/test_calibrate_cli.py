@@ -289,4 +289,5 @@ def test_calibrate_on_a_users_data_fits_the_baseline_and_adds_nothing(tmp_path, 
     assert res["chosen"] == [] and res["steps"][0]["screens"] == []
     lo, hi = res["final"]["interval_2sigma"]["E_b"]
     assert 2e7 <= lo <= res["final"]["params"]["E_b"] <= hi <= 2e8
+    assert res["final"]["fit_packings_se"] is None  # two packings leave none to jackknife
     assert (out / "report.md").read_text().startswith("# Calibration on")
