@@ -24,8 +24,8 @@ from .loop_jackknife import packing_jackknife, with_packing_luck
 from .loop_noise import PackingNoise
 from .loop_simulators import Ensemble, Simulator
 
-__all__ = ["ModelFit", "REFINE_ROUNDS", "design_size", "relaxing_axes", "share_relaxations", "simulate_design",
-           "local_design", "fit_model",
+__all__ = ["ModelFit", "REFINE_ROUNDS", "SETTLED", "design_size", "relaxing_axes", "share_relaxations",
+           "simulate_design", "local_design", "fit_model",
            "nested_points", "ensemble_z", "emulator_correlation", "chi2_of", "with_more_check_packings"]
 
 
@@ -33,6 +33,8 @@ __all__ = ["ModelFit", "REFINE_ROUNDS", "design_size", "relaxing_axes", "share_r
 #: models that reached the third still moving (by up to 0.27 of the box, on spring-back
 #: laws), and such a fit was judged where its emulator had seen no simulation.
 REFINE_ROUNDS = 5
+#: A fit that moves less than this fraction of the unit box in a refinement round has settled.
+SETTLED = 0.02
 
 #: Design points within about this distance of the fit (unit box) inform the packings'
 #: correlation (:mod:`pelletdem.loop_noise`): Gaussian weights of this width.
@@ -84,7 +86,9 @@ class ModelFit:
     correlation between observations (:mod:`pelletdem.loop_noise`) its errors allow for;
     ``members``: each packing's prediction at the emulator's design points (points, packings,
     observations), from which its errors measure what the fit owes to the fit packings
-    (:mod:`pelletdem.loop_jackknife`)."""
+    (:mod:`pelletdem.loop_jackknife`); ``last_move``: how far the fit moved in its last
+    refinement (fraction of the unit box; nan when none ran), at least :data:`SETTLED` when
+    the rounds ran out before it settled."""
 
     effects: Tuple[str, ...]
     space: Space
@@ -97,6 +101,13 @@ class ModelFit:
     z_check_held: Optional[np.ndarray]
     noise: PackingNoise
     members: Optional[np.ndarray] = None
+    last_move: float = math.nan
+
+    @property
+    def settled(self) -> bool:
+        """False when the refinement rounds ran out with the fit still moving: its errors and
+        the gates then read an emulator that has not simulated the optimum."""
+        return not self.last_move >= SETTLED
 
     @property
     def name(self) -> str:
@@ -192,7 +203,7 @@ def fit_model(sim: Simulator, space: Space, effects: Sequence[str], fit_data: Da
     starting point (SI) for the fit; the design's best points are tried too. ``refine``: at
     most this many rounds of refinement, each simulating the fitted point and 2 d + 2 points
     around it (in a box of half-width 0.15, 0.075, ... of the unit box) and fitting again on
-    the richer emulator, until the fit moves less than 0.02 of the box. ``shared``: (U, Y, SE)
+    the richer emulator, until the fit moves less than :data:`SETTLED` of the box. ``shared``: (U, Y, SE)
     already simulated in this box on the same packings (the nested model's design, its new
     axis at the strength that switches the effect off, :func:`nested_points`), which join
     the emulator without being simulated again (and the packings' own predictions there, as a
@@ -218,6 +229,7 @@ def fit_model(sim: Simulator, space: Space, effects: Sequence[str], fit_data: Da
     emu = _emulate(space, U, Y, SE, name, errors=errors)
     fit = fit_emulated(emu, fit_data, space.unit(start) if start else None,
                        corr=emulator_correlation(noise, emu, fit_data, k))
+    moved = math.nan
     for r in range(refine):
         Ul = local_design(space, fit.u, 0.15 / 2 ** r, 2 * space.dim + 2, seed=r + 1, relaxing=relaxing)
         _, Yl, SEl, Vl = simulate_design(sim, space, fit_data, fit_seeds, U=Ul, errors=errors)
@@ -230,7 +242,7 @@ def fit_model(sim: Simulator, space: Space, effects: Sequence[str], fit_data: Da
         moved = float(np.max(np.abs(new.u - fit.u)))
         log(f"{name}: refinement {r + 1} ({len(U)} points), the fit moved {moved:.3f} of the box")
         fit = new
-        if moved < 0.02:
+        if moved < SETTLED:
             break
         if r == refine - 1:
             log(f"{name}: the fit had not settled after {refine} refinements (it moved {moved:.3f} of the box "
@@ -263,7 +275,7 @@ def fit_model(sim: Simulator, space: Space, effects: Sequence[str], fit_data: Da
     check = sim.predict(fit.params, conds, tuple(check_seeds))
     z_held = ensemble_z(check, heldout) if heldout is not None else None
     mf = ModelFit(tuple(effects), space, emu, fit, direct, check, ensemble_z(direct, fit_data),
-                  ensemble_z(check, fit_data), z_held, noise, members)
+                  ensemble_z(check, fit_data), z_held, noise, members, moved)
     log(f"{name}: {len(U)} design points ({int(failed.sum())} failed), emulated chi2/n "
         f"{fit.chi2_per_point:.2f} at " + ", ".join(f"{k} = {fit.params[k]:.4g}" for k in space.names)
         + f"; fresh packings: chi2/n {chi2_of(mf.z_check_fit) / len(fit_data):.2f} fit"

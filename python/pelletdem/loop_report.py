@@ -19,7 +19,7 @@ from .loop_models import ModelFit
 from .loop_screen import screens_table
 from .loop_selection import LoopResult
 
-__all__ = ["write_report", "summary"]
+__all__ = ["write_report", "summary", "model_summary", "params_text"]
 
 
 def _plt():
@@ -213,7 +213,9 @@ def _relaxed(res: LoopResult) -> str:
     return "\n".join(rows)
 
 
-def _params(mf: ModelFit) -> str:
+def params_text(mf: ModelFit) -> str:
+    """The fitted parameters as the report writes them: value, standard error, 2-sigma
+    interval where profiled, and a warning when the fit had not settled."""
     out = []
     for name in mf.space.names:
         v, se = mf.fit.params[name], mf.fit.se.get(name, math.nan)
@@ -222,29 +224,36 @@ def _params(mf: ModelFit) -> str:
         lo, hi = mf.fit.interval(name, 2.0)
         band = f", 2-sigma {lo:.3g}..{hi:.3g}" if name in mf.fit.profiles else ""
         out.append(f"{name} = {v:.4g}{unc}{band}")
-    return ", ".join(out)
+    moving = ("" if mf.settled else f" (not settled: the fit still moved {mf.last_move:.3f} of the box in its last "
+              "refinement, so these errors read an emulator that has not simulated its optimum)")
+    return ", ".join(out) + moving
+
+
+def model_summary(mf: ModelFit) -> dict:
+    """One fitted model as plain data: parameters (SI) with standard errors (relative for
+    log axes), 2-sigma intervals, the fit packings' share of the errors, the emulated chi2,
+    the design's size and whether the refinement settled."""
+    return {"name": mf.name, "params": {k: mf.fit.params[k] for k in mf.space.names},
+            "se": {k: mf.fit.se.get(k) for k in mf.space.names},
+            "interval_2sigma": {k: list(mf.fit.interval(k, 2.0)) for k in mf.space.names},
+            "fit_packings_se": ({a.name: math.sqrt(max(float(mf.fit.jackknife[i, i]), 0.0)) * a.relative_scale()
+                                 for i, a in enumerate(mf.space.axes)} if mf.fit.jackknife is not None else None),
+            "emulated_chi2": mf.fit.chi2,
+            "design_points": int(len(mf.emulator.U)),
+            "last_move": None if math.isnan(mf.last_move) else mf.last_move, "settled": mf.settled}
 
 
 def summary(res: LoopResult) -> dict:
     """The loop's outcome as plain data (for loop.json): verdict, chosen effects, errors,
     fitted parameters with standard errors, the steps' screening and trials, the power."""
-    def model(mf: ModelFit) -> dict:
-        return {"name": mf.name, "params": {k: mf.fit.params[k] for k in mf.space.names},
-                "se": {k: mf.fit.se.get(k) for k in mf.space.names},
-                "interval_2sigma": {k: list(mf.fit.interval(k, 2.0)) for k in mf.space.names},
-                "fit_packings_se": ({a.name: math.sqrt(max(float(mf.fit.jackknife[i, i]), 0.0)) * a.relative_scale()
-                                     for i, a in enumerate(mf.space.axes)} if mf.fit.jackknife is not None else None),
-                "emulated_chi2": mf.fit.chi2,
-                "design_points": int(len(mf.emulator.U))}
-
     return {"verdict": res.verdict, "chosen": list(res.chosen), "errors": res.errors,
-            "baseline": model(res.baseline), "final": model(res.final),
+            "baseline": model_summary(res.baseline), "final": model_summary(res.final),
             "steps": [{"model": st.model.name, "structured": st.residual.structured, "threshold": st.threshold,
                        "screens": [{"effect": s.effect.name, "gain": s.gain, "strength": s.strength,
                                     "skipped": s.skipped} for s in st.screens],
                        "trials": [{"effect": t.effect.name, "accepted": t.accepted, "why": t.why,
                                    "delta_chi2": t.delta_chi2, "check_before": t.check_before,
-                                   "check_after": t.check_after, "model": model(t.model)} for t in st.trials],
+                                   "check_after": t.check_after, "model": model_summary(t.model)} for t in st.trials],
                        "added": st.added, "rivals": list(st.rivals)} for st in res.steps],
             "power": {k: {"detectable": p.detectable, "replicates": p.replicates, "packings": p.packings,
                           "statement": p.statement} for k, p in res.power.items()},
@@ -280,7 +289,7 @@ def write_report(res: LoopResult, out_dir: str, title: str = "Discrepancy loop")
                   "variances x" + ", x".join(f"{widen[a]:.2f}" for a in st.model.space.names)
                   + ".") if widen and max(widen.values()) > 1.0 else ""
         L += [f"## Step {k + 1}: {st.model.name}", "", f"Fitted (emulated chi2 {st.model.fit.chi2:.1f} on "
-              f"{st.model.fit.n} numbers, {len(st.model.emulator.U)} design points): {_params(st.model)}.{shared}",
+              f"{st.model.fit.n} numbers, {len(st.model.emulator.U)} design points): {params_text(st.model)}.{shared}",
               "", "Residual:", ""]
         L += ["    " + s for s in st.residual.lines()]
         if st.screens:
@@ -288,7 +297,7 @@ def write_report(res: LoopResult, out_dir: str, title: str = "Discrepancy loop")
                   screens_table(st.screens, st.powers or res.power)]
         for t in st.trials:
             L += ["", f"- **{t.effect.name}** {'added' if t.accepted else 'not added'}: {t.why}. Fitted: "
-                  f"{_params(t.model)}."]
+                  f"{params_text(t.model)}."]
         if st.rivals:
             L += ["", f"- {st.added} and {' and '.join(st.rivals)} fit as well (on fresh packings their chi2 within 2 "
                   "of each other, their BIC difference, or within twice the scatter of that difference between the "

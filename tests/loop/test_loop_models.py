@@ -1,5 +1,8 @@
-"""Designs of the loop's models: what a failed design point leaves behind."""
+"""Designs of the loop's models: what a failed design point leaves behind, and a fit that has not
+settled when its refinement rounds run out."""
 from __future__ import annotations
+
+import math
 
 import numpy as np
 import pytest
@@ -7,7 +10,8 @@ import pytest
 from pelletdem.loop import Condition, Dataset, FunctionSimulator, Prediction
 from pelletdem.loop_box import Axis, Space
 from pelletdem.loop_data import Observation
-from pelletdem.loop_models import fit_model, simulate_design
+from pelletdem.loop_models import SETTLED, fit_model, simulate_design
+from pelletdem.loop_report import model_summary, params_text
 
 COND = Condition(120e6)
 DATA = Dataset([Observation(COND, "sigma_f", float("nan"), 1.0e6, 5e4, 5),
@@ -45,3 +49,31 @@ def test_a_fit_whose_every_point_failed_says_why():
     sim = FunctionSimulator(lambda p, c, s: Prediction(ok=False, error="OverlapError: at 120 MPa"), (0, 1))
     with pytest.raises(RuntimeError, match=r"every design point's simulation failed \(the first: E_b = .*OverlapError"):
         fit_model(sim, SPACE, (), DATA, None, (0, 1), (10, 11), n_design=6, refine=0)
+
+
+def _wavy_pellet(params, cond, seed):
+    # a response too wavy for a 4-point design's emulator to place the optimum at once
+    x = math.log10(params["sigma_c"])
+    return Prediction(scalars={"sigma_f": 1e6 * (1 + 4 * math.sin(3 * x) ** 2) * 10 ** (x - 7) + 1e3 * seed,
+                               "bulk_density": 600.0 + 30 * math.sin(2 * math.log10(params["E_b"])) + seed})
+
+
+def test_a_fit_still_moving_when_its_rounds_run_out_says_so():
+    sim = FunctionSimulator(_wavy_pellet, default_seeds=(0, 1, 2))
+    lines = []
+    mf = fit_model(sim, SPACE, (), DATA, None, (0, 1, 2), (10, 11, 12), n_design=4, log=lines.append, refine=1)
+    assert mf.last_move >= SETTLED and not mf.settled
+    assert any("had not settled after 1 refinements" in s for s in lines)
+    assert "not settled: the fit still moved" in params_text(mf)
+    assert model_summary(mf)["settled"] is False
+    # one more round on the same design settles it, and then nothing is said
+    lines = []
+    mf = fit_model(sim, SPACE, (), DATA, None, (0, 1, 2), (10, 11, 12), n_design=4, log=lines.append, refine=2)
+    assert mf.last_move < SETTLED and mf.settled
+    assert not any("had not settled" in s for s in lines) and "not settled" not in params_text(mf)
+
+
+def test_a_fit_without_refinement_has_no_move_to_report():
+    sim = FunctionSimulator(_wavy_pellet, default_seeds=(0, 1, 2))
+    mf = fit_model(sim, SPACE, (), DATA, None, (0, 1, 2), (10, 11, 12), n_design=4, refine=0)
+    assert math.isnan(mf.last_move) and mf.settled
