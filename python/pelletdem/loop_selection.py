@@ -61,6 +61,7 @@ from .loop_data import Condition, Dataset
 from .loop_emulator import Axis, Space
 from .loop_models import ModelFit, chi2_of, ensemble_z, fit_model, nested_points, with_more_check_packings
 from .loop_screen import Power, Screen, detection_power, screen
+from .loop_separation import chance_right, replicates_factor, separation
 from .loop_simulators import MAX_WINDOW, Ensemble, Simulator, next_window
 from .residuals import DEFAULT_ALPHA, ResidualSummary, describe
 
@@ -107,7 +108,8 @@ class Step:
     ``screens``, the ``trials``, the effect ``added`` (None when none was) and its ``rivals``:
     other accepted candidates within :data:`TIE_CHI2` of it on fresh packings or better in the
     emulated fit; ``powers``: what the data could reveal of each screened candidate on top of
-    this round's model."""
+    this round's model; ``separations``: rival -> how far these data separate it from the
+    effect added (:func:`pelletdem.loop_separation.separation`)."""
 
     model: ModelFit
     residual: ResidualSummary
@@ -118,6 +120,7 @@ class Step:
     note: str = ""
     rivals: List[str] = field(default_factory=list)
     powers: Dict[str, Power] = field(default_factory=dict)
+    separations: Dict[str, float] = field(default_factory=dict)
 
 
 @dataclass
@@ -389,6 +392,12 @@ def _inconclusive(g: Gates, drop: float, before: ModelFit, after: ModelFit, fit_
                  rrmse_rise_se(before, after, fit_data, heldout), 0.0)[0]
 
 
+def _separation(a: ModelFit, b: ModelFit, fit_data: Dataset, heldout: Optional[Dataset]) -> float:
+    """D of :func:`pelletdem.loop_separation.separation` over the fit and held-out data, on
+    the two models' fresh packings."""
+    return separation(a.check, b.check, fit_data) + (separation(a.check, b.check, heldout) if heldout else 0.0)
+
+
 def pick(accepted: Sequence[Trial], scatter: Optional[Callable[[ModelFit, ModelFit], float]] = None
          ) -> Tuple[Optional[Trial], List[str]]:
     """The accepted candidate to add and the names of its rivals.
@@ -576,8 +585,14 @@ def close_loop(sim: Simulator, data: Dataset, base_bounds: Mapping[str, Sequence
             say(f"{e.name}: {'accepted' if ok else 'not accepted'}: {why}")
         added, rivals = pick([t for t in trials if t.accepted],
                              lambda a, b: check_chi2_se(a, b, fit_data, heldout))
+        seps = {t.effect.name: _separation(added.model, t.model, fit_data, heldout)
+                for t in trials if t.effect.name in rivals}
+        for r, d in seps.items():
+            say(f"{added.effect.name} and {r}: their predictions on fresh packings are {d:.1f} apart in chi2 "
+                f"(the data's errors): data like these name the right one {100 * chance_right(d):.0f} % of the "
+                f"time; x{replicates_factor(d):.2g} the replicates would name it 19 times in 20")
         steps.append(Step(model, residual, screens, trials, added.effect.name if added else None, threshold,
-                          rivals=rivals, powers=round_powers))
+                          rivals=rivals, powers=round_powers, separations=seps))
         if added is None:
             break
         chosen.append(added.effect.name)

@@ -211,6 +211,10 @@ def test_candidates_the_data_cannot_tell_apart_are_both_named(tmp_path):
     assert res.verdict.startswith("added trend (twin fits as well: these data do not tell them apart)")
     text = open(write_report(res, str(tmp_path), "toy")).read()
     assert "these data do not tell them apart; trend was added" in text
+    # the same law fitted twice predicts nearly the same: the data cannot separate them
+    d = res.steps[0].separations["twin"]
+    assert 0.0 <= d < 1.0
+    assert "trend and twin predict" in text and "name the right one of the two" in text
     # a clear winner has no rival
     assert toy_loop(LIBRARY["trend"].settings(HIDDEN["trend"]), 0).steps[0].rivals == []
 
