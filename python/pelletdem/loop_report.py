@@ -18,7 +18,7 @@ from .loop_data import QUANTITIES, Dataset
 from .loop_models import ModelFit
 from .loop_screen import screens_table
 from .loop_selection import LoopResult
-from .loop_separation import chance_right, replicates_factor
+from .loop_separation import statement
 
 __all__ = ["write_report", "summary", "model_summary", "params_text"]
 
@@ -305,10 +305,7 @@ def write_report(res: LoopResult, out_dir: str, title: str = "Discrepancy loop")
                   "of each other, their BIC difference, or within twice the scatter of that difference between the "
                   "packings, or the emulated fit preferring the other): these data do not "
                   f"tell them apart; {st.added} was added for the lower chi2 on fresh packings."]
-            L += [f"  {st.added} and {r} predict {d:.1f} apart in chi2 (their mean predictions on the same fresh "
-                  "packings, in the data's standard errors, less the packings' noise): data like these name the "
-                  f"right one of the two {100 * chance_right(d):.0f} % of the time, and x{replicates_factor(d):.2g} "
-                  "the replicates would name it 19 times in 20." for r, d in st.separations.items()]
+            L += [f"  {statement(st.added, r, d)}." for r, d in st.separations.items()]
         L.append("")
     if "screen" in figs:
         L += [f"![screening]({os.path.basename(figs['screen'])})", ""]

@@ -61,7 +61,7 @@ from .loop_data import Condition, Dataset
 from .loop_emulator import Axis, Space
 from .loop_models import ModelFit, chi2_of, ensemble_z, fit_model, nested_points, with_more_check_packings
 from .loop_screen import Power, Screen, detection_power, screen
-from .loop_separation import chance_right, replicates_factor, separation
+from .loop_separation import separation, statement
 from .loop_simulators import MAX_WINDOW, Ensemble, Simulator, next_window
 from .residuals import DEFAULT_ALPHA, ResidualSummary, describe
 
@@ -588,9 +588,7 @@ def close_loop(sim: Simulator, data: Dataset, base_bounds: Mapping[str, Sequence
         seps = {t.effect.name: _separation(added.model, t.model, fit_data, heldout)
                 for t in trials if t.effect.name in rivals}
         for r, d in seps.items():
-            say(f"{added.effect.name} and {r}: their predictions on fresh packings are {d:.1f} apart in chi2 "
-                f"(the data's errors): data like these name the right one {100 * chance_right(d):.0f} % of the "
-                f"time; x{replicates_factor(d):.2g} the replicates would name it 19 times in 20")
+            say(statement(added.effect.name, r, d))
         steps.append(Step(model, residual, screens, trials, added.effect.name if added else None, threshold,
                           rivals=rivals, powers=round_powers, separations=seps))
         if added is None:

@@ -25,7 +25,7 @@ import numpy as np
 from .loop_data import Dataset
 from .loop_simulators import Ensemble
 
-__all__ = ["SURE", "separation", "chance_right", "replicates_factor"]
+__all__ = ["SURE", "separation", "chance_right", "replicates_factor", "statement"]
 
 #: D at which the data name the right one of two models 19 times in 20: (2 z_0.95)^2.
 SURE = (2.0 * 1.6448536269514722) ** 2
@@ -70,3 +70,15 @@ def replicates_factor(d: float) -> float:
     by ``d`` 19 times in 20 (:data:`SURE` / d: below 1 where these data already do; inf when
     d is 0)."""
     return SURE / d if d > 0 else math.inf
+
+
+def statement(added: str, rival: str, d: float) -> str:
+    """The report's sentence on two candidates that fit as well, separated by ``d``."""
+    head = (f"{added} and {rival} predict {d:.1f} apart in chi2 (their mean predictions on the same fresh packings, "
+            "in the data's standard errors, less the packings' noise)")
+    if d <= 0:
+        return head + (": they predict the same here, and no number of replicates of these conditions would tell "
+                       "them apart")
+    return (head + f": data like these name the right one of the two {100 * chance_right(d):.0f} % of the time"
+            + (f", and x{replicates_factor(d):.2g} the replicates would name it 19 times in 20" if d < SURE
+               else ", at least 19 times in 20"))

@@ -9,7 +9,7 @@ import pytest
 
 from pelletdem.loop import Condition, Dataset, Prediction
 from pelletdem.loop_data import Observation
-from pelletdem.loop_separation import SURE, chance_right, replicates_factor, separation
+from pelletdem.loop_separation import SURE, chance_right, replicates_factor, separation, statement
 from pelletdem.loop_simulators import Ensemble
 
 C60, C120 = Condition(60e6), Condition(120e6)
@@ -75,3 +75,10 @@ def test_how_many_replicates_would_make_the_choice_sure():
     assert replicates_factor(0.0) == math.inf
     # D grows with the replicates: n * factor replicates bring it to SURE
     assert chance_right(SURE / 4 * replicates_factor(SURE / 4)) == pytest.approx(0.95, abs=1e-9)
+
+
+def test_the_sentence_says_what_would_tell_them_apart():
+    assert "50 %" not in statement("a", "b", 0.0) and "no number of replicates" in statement("a", "b", 0.0)
+    s = statement("a", "b", SURE / 4)
+    assert "a and b predict 2.7 apart" in s and "79 %" in s and "x4 the replicates" in s
+    assert "at least 19 times in 20" in statement("a", "b", 2 * SURE)
