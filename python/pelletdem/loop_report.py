@@ -18,7 +18,6 @@ from .loop_data import QUANTITIES, Dataset
 from .loop_models import ModelFit
 from .loop_screen import screens_table
 from .loop_selection import LoopResult
-from .loop_separation import statement
 
 __all__ = ["write_report", "summary", "model_summary", "params_text"]
 
@@ -305,7 +304,7 @@ def write_report(res: LoopResult, out_dir: str, title: str = "Discrepancy loop")
                   "of each other, their BIC difference, or within twice the scatter of that difference between the "
                   "packings, or the emulated fit preferring the other): these data do not "
                   f"tell them apart; {st.added} was added for the lower chi2 on fresh packings."]
-            L += [f"  {statement(st.added, r, d)}." for r, d in st.separations.items()]
+        L += [f"  {note}." if st.rivals else f"\n- {note}." for note in st.rival_notes]
         L.append("")
     if "screen" in figs:
         L += [f"![screening]({os.path.basename(figs['screen'])})", ""]

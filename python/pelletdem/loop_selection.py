@@ -47,6 +47,7 @@ procedure is forward selection:
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
@@ -57,12 +58,13 @@ from scipy import stats
 
 from .effects import EFFECTS, Effect, clash
 from .loop_box import pinned, pinned_list, pinned_note, rebox, widened
+from .loop_check import check_chi2, check_chi2_se, check_rrmse, held_chi2, model_errors, rrmse_rise_se
 from .loop_data import Condition, Dataset
 from .loop_emulator import Axis, Space
-from .loop_models import ModelFit, chi2_of, ensemble_z, fit_model, nested_points, with_more_check_packings
+from .loop_models import ModelFit, fit_model, nested_points, with_more_check_packings
 from .loop_screen import Power, Screen, detection_power, screen
 from .loop_separation import separation, statement
-from .loop_simulators import MAX_WINDOW, Ensemble, Simulator, next_window
+from .loop_simulators import MAX_WINDOW, Simulator, next_window
 from .residuals import DEFAULT_ALPHA, ResidualSummary, describe
 
 __all__ = ["FIT_SEEDS", "CHECK_SEEDS", "MAX_WINDOW", "unfailed", "Trial", "Step", "LoopResult", "close_loop",
@@ -109,7 +111,8 @@ class Step:
     other accepted candidates within :data:`TIE_CHI2` of it on fresh packings or better in the
     emulated fit; ``powers``: what the data could reveal of each screened candidate on top of
     this round's model; ``separations``: rival -> how far these data separate it from the
-    effect added (:func:`pelletdem.loop_separation.separation`)."""
+    effect added (:func:`pelletdem.loop_separation.separation`); ``rival_notes``: what the
+    check of the rivals on more packings found, and each rival's separation, in words."""
 
     model: ModelFit
     residual: ResidualSummary
@@ -121,6 +124,7 @@ class Step:
     rivals: List[str] = field(default_factory=list)
     powers: Dict[str, Power] = field(default_factory=dict)
     separations: Dict[str, float] = field(default_factory=dict)
+    rival_notes: List[str] = field(default_factory=list)
 
 
 @dataclass
@@ -234,84 +238,6 @@ def describe_residual(data: Dataset, z: np.ndarray, n_params: int, alpha: float 
                     levels=levels, groups=groups, n_params=n_params, alpha=alpha)
 
 
-def _rrmse(ensembles, data: Optional[Dataset]) -> float:
-    if data is None:
-        return math.nan
-    rel = []
-    for o in data.observations:
-        m, _ = ensembles[o.condition].mean_se(o)
-        rel.append((m - o.value) / o.value if o.value else math.nan)
-    rel = np.asarray(rel, float)
-    return float(np.sqrt(np.nanmean(rel ** 2)))
-
-
-def _errors(mf: ModelFit, fit_data: Dataset, heldout: Optional[Dataset]) -> Dict[str, float]:
-    n_h = len(heldout) if heldout is not None else 0
-    return {"fit_chi2_per_point": chi2_of(mf.z_check_fit) / len(fit_data),
-            "fit_rrmse": _rrmse(mf.check, fit_data),
-            "heldout_chi2_per_point": chi2_of(mf.z_check_held) / n_h if n_h else math.nan,
-            "heldout_rrmse": _rrmse(mf.check, heldout)}
-
-
-def _rrmse_all(check: Mapping[Condition, Ensemble], fit_data: Dataset, heldout: Optional[Dataset]) -> float:
-    n_f, n_h = len(fit_data), len(heldout) if heldout is not None else 0
-    sq = n_f * _rrmse(check, fit_data) ** 2 + (n_h * _rrmse(check, heldout) ** 2 if n_h else 0.0)
-    return math.sqrt(sq / (n_f + n_h))
-
-
-def _check_rrmse(mf: ModelFit, fit_data: Dataset, heldout: Optional[Dataset]) -> float:
-    """RRMSE (eq. 16) of all the data (fit and held-out conditions) on the check seeds."""
-    return _rrmse_all(mf.check, fit_data, heldout)
-
-
-def _without(check: Mapping[Condition, Ensemble], j: int) -> Dict[Condition, Ensemble]:
-    return {c: Ensemble(e.seeds[:j] + e.seeds[j + 1:], e.members[:j] + e.members[j + 1:]) for c, e in check.items()}
-
-
-def _jackknife_se(before: ModelFit, after: ModelFit, stat: Callable[[Mapping[Condition, Ensemble]], float]) -> float:
-    """Standard error of stat(after) - stat(before) over the check packings: the jackknife,
-    leaving each packing out of both models' means in turn. It measures the packings' part of
-    the difference, not the data's noise, which the two models share; where both models have
-    the same pellets (an effect of the diametral test) their packings' scatter cancels in
-    part, where a compaction effect made new pellets it does not. 0 with fewer than three
-    packings (no tolerance)."""
-    k = min(len(e.members) for e in (*before.check.values(), *after.check.values()))
-    if k < 3:
-        return 0.0
-    d = np.array([stat(_without(after.check, j)) - stat(_without(before.check, j)) for j in range(k)])
-    d = d[np.isfinite(d)]
-    if len(d) < 3:
-        return 0.0
-    return float(math.sqrt((len(d) - 1) / len(d) * np.sum((d - d.mean()) ** 2)))
-
-
-def rrmse_rise_se(before: ModelFit, after: ModelFit, fit_data: Dataset, heldout: Optional[Dataset]) -> float:
-    """Standard error (-) of the rise of the check packings' RRMSE (eq. 16, all the data) from
-    ``before`` to ``after`` (both checked on the same packing seeds): :func:`_jackknife_se`."""
-    return _jackknife_se(before, after, lambda check: _rrmse_all(check, fit_data, heldout))
-
-
-def check_chi2_se(before: ModelFit, after: ModelFit, fit_data: Dataset, heldout: Optional[Dataset]) -> float:
-    """Standard error (-) of the change of the check packings' chi2 (all the data) from
-    ``before`` to ``after``: :func:`_jackknife_se`. A compaction effect checked on new pellets
-    can lower that chi2 by luck of the packings; this says by how much."""
-    def chi2(check):
-        held = chi2_of(ensemble_z(check, heldout)) if heldout is not None else 0.0
-        return chi2_of(ensemble_z(check, fit_data)) + held
-
-    return _jackknife_se(before, after, chi2)
-
-
-def _check_chi2(mf: ModelFit) -> float:
-    """chi2 of all the data on the check seeds."""
-    held = chi2_of(mf.z_check_held) if mf.z_check_held is not None else 0.0
-    return chi2_of(mf.z_check_fit) + held
-
-
-def _held_chi2(mf: ModelFit) -> float:
-    return chi2_of(mf.z_check_held) if mf.z_check_held is not None else 0.0
-
-
 @dataclass(frozen=True)
 class Gates:
     """What a candidate must pass: the fit test's ``threshold`` (chi2 drop), the number of
@@ -364,7 +290,7 @@ def judge(g: Gates, drop: float, before: Tuple[float, float, float],
 def _check_numbers(mf: ModelFit, fit_data: Dataset, heldout: Optional[Dataset]) -> Tuple[float, float, float]:
     """(chi2 of all the data, chi2 of the held-out data, RRMSE of all the data) on the check
     packings."""
-    return _check_chi2(mf), _held_chi2(mf), _check_rrmse(mf, fit_data, heldout)
+    return check_chi2(mf), held_chi2(mf), check_rrmse(mf, fit_data, heldout)
 
 
 def _judge_on(g: Gates, drop: float, before: ModelFit, after: ModelFit, fit_data: Dataset,
@@ -396,6 +322,34 @@ def _separation(a: ModelFit, b: ModelFit, fit_data: Dataset, heldout: Optional[D
     """D of :func:`pelletdem.loop_separation.separation` over the fit and held-out data, on
     the two models' fresh packings."""
     return separation(a.check, b.check, fit_data) + (separation(a.check, b.check, heldout) if heldout else 0.0)
+
+
+def _rivals_on_more_packings(sim: Simulator, contenders: Sequence[Trial], more: Sequence[int], fit_data: Dataset,
+                             heldout: Optional[Dataset], say: Callable[[str], None]
+                             ) -> Tuple[Trial, List[str], Dict[str, float], List[str]]:
+    """Candidates that fit as well (the one picked first) checked again on ``more`` packings
+    besides their check packings, and picked again there: the trial to add (as fitted and
+    checked before, so that the next round compares like with like), its rivals on all those
+    packings, how far the data separate each (:func:`_separation`), and what was found, in
+    words. The packings' luck that tied them shrinks; the data's separation, if any, decides."""
+    ext = [dataclasses.replace(t, model=with_more_check_packings(sim, t.model, more, fit_data, heldout))
+           for t in contenders]
+    ext = [dataclasses.replace(t, check_after=check_chi2(t.model)) for t in ext]
+    k = len(next(iter(ext[0].model.check.values())).seeds)
+    best, rivals = pick(ext, lambda a, b: check_chi2_se(a, b, fit_data, heldout))
+    notes = [f"{' and '.join(t.effect.name for t in contenders)} fit as well on the check packings; checked again "
+             f"on {k} packings (chi2 " + ", ".join(f"{t.effect.name} {t.check_after:.1f}" for t in ext)
+             + f"), {best.effect.name} is the lower"]
+    seps = {}
+    for t in ext:
+        if t.effect.name in rivals:
+            seps[t.effect.name] = _separation(best.model, t.model, fit_data, heldout)
+            notes.append(statement(best.effect.name, t.effect.name, seps[t.effect.name], k,
+                                   t.check_after - best.check_after, check_chi2_se(best.model, t.model, fit_data,
+                                                                                   heldout)))
+    for line in notes:
+        say(line)
+    return next(t for t in contenders if t.effect is best.effect), rivals, seps, notes
 
 
 def pick(accepted: Sequence[Trial], scatter: Optional[Callable[[ModelFit, ModelFit], float]] = None
@@ -521,7 +475,7 @@ def close_loop(sim: Simulator, data: Dataset, base_bounds: Mapping[str, Sequence
             say(f"the box cannot be widened there: {err}")
             break
     baseline = model
-    errors = {model.name: _errors(model, fit_data, heldout)}
+    errors = {model.name: model_errors(model, fit_data, heldout)}
     steps: List[Step] = []
     chosen: List[str] = []
     powers: Dict[str, Power] = {}
@@ -549,7 +503,7 @@ def close_loop(sim: Simulator, data: Dataset, base_bounds: Mapping[str, Sequence
         say("screened: " + ", ".join(f"{s.effect.name} {s.gain:.1f}" if not s.skipped else f"{s.effect.name} (-)"
                                      for s in screens) + f"; fit test threshold {threshold:.1f}")
         trials: List[Trial] = []
-        base_before = _check_chi2(model)
+        base_before = check_chi2(model)
         n_held = len(heldout) if heldout is not None else 0
         n_check = n + n_held
         gates = Gates(threshold, n_check, n_held, min_check_gain)
@@ -570,7 +524,7 @@ def close_loop(sim: Simulator, data: Dataset, base_bounds: Mapping[str, Sequence
             cand = fit(space, model.effects + (e.name,), dict(model.fit.params, **e.settings(s.strength)),
                        nested_points(model, off_unit(e, axis)), model.noise)
             drop = model.fit.chi2 - cand.fit.chi2
-            after = _check_chi2(cand)
+            after = check_chi2(cand)
             ok, why = _judge_on(gates, drop, model, cand, fit_data, heldout)
             if not ok and _inconclusive(gates, drop, model, cand, fit_data, heldout):
                 # within the packings' luck: look at as many packings again before refusing
@@ -581,16 +535,18 @@ def close_loop(sim: Simulator, data: Dataset, base_bounds: Mapping[str, Sequence
                                     with_more_check_packings(sim, cand, more, fit_data, heldout), fit_data, heldout)
                 why += f" (on {len(check_seeds) + len(more)} fresh packings)"
             trials.append(Trial(e, cand, drop, base_before, after, ok, why))
-            errors[cand.name] = _errors(cand, fit_data, heldout)
+            errors[cand.name] = model_errors(cand, fit_data, heldout)
             say(f"{e.name}: {'accepted' if ok else 'not accepted'}: {why}")
-        added, rivals = pick([t for t in trials if t.accepted],
-                             lambda a, b: check_chi2_se(a, b, fit_data, heldout))
-        seps = {t.effect.name: _separation(added.model, t.model, fit_data, heldout)
-                for t in trials if t.effect.name in rivals}
-        for r, d in seps.items():
-            say(statement(added.effect.name, r, d))
+        accepted = [t for t in trials if t.accepted]
+        added, rivals = pick(accepted, lambda a, b: check_chi2_se(a, b, fit_data, heldout))
+        seps: Dict[str, float] = {}
+        notes: List[str] = []
+        if rivals:
+            added, rivals, seps, notes = _rivals_on_more_packings(
+                sim, [added] + [t for t in accepted if t.effect.name in rivals],
+                _more_check_seeds(fit_seeds, check_seeds), fit_data, heldout, say)
         steps.append(Step(model, residual, screens, trials, added.effect.name if added else None, threshold,
-                          rivals=rivals, powers=round_powers, separations=seps))
+                          rivals=rivals, powers=round_powers, separations=seps, rival_notes=notes))
         if added is None:
             break
         chosen.append(added.effect.name)

@@ -72,13 +72,24 @@ def replicates_factor(d: float) -> float:
     return SURE / d if d > 0 else math.inf
 
 
-def statement(added: str, rival: str, d: float) -> str:
-    """The report's sentence on two candidates that fit as well, separated by ``d``."""
-    head = (f"{added} and {rival} predict {d:.1f} apart in chi2 (their mean predictions on the same fresh packings, "
-            "in the data's standard errors, less the packings' noise)")
+def statement(added: str, rival: str, d: float, k: int = 0, diff: float = math.nan,
+              scatter: float = math.nan) -> str:
+    """The report's sentence on two candidates that fit as well, separated by ``d``; with
+    ``k`` > 0, also the chi2 by which the ``rival`` trails on the ``k`` fresh packings that
+    decided (``diff``) and that difference's scatter between them (``scatter``)."""
+    out = (f"{added} and {rival} predict {d:.1f} apart in chi2 (their mean predictions on the same fresh packings, "
+           "in the data's standard errors, less the packings' noise)")
     if d <= 0:
-        return head + (": they predict the same here, and no number of replicates of these conditions would tell "
-                       "them apart")
-    return (head + f": data like these name the right one of the two {100 * chance_right(d):.0f} % of the time"
-            + (f", and x{replicates_factor(d):.2g} the replicates would name it 19 times in 20" if d < SURE
-               else ", at least 19 times in 20"))
+        out += ": they predict the same here, and no number of replicates of these conditions would tell them apart"
+    else:
+        out += (f": were both models' means known exactly, data like these would name the right one of the two "
+                f"{100 * chance_right(d):.0f} % of the time"
+                + (f", and x{_times(replicates_factor(d))} the replicates 19 times in 20" if d < SURE else ""))
+    if k > 0:
+        out += (f"; on the {k} fresh packings that decided, {rival}'s chi2 is {diff:.1f} above {added}'s, with a "
+                f"scatter of {scatter:.1f} between the packings")
+    return out
+
+
+def _times(r: float) -> str:
+    return f"{r:.0f}" if r >= 10 else f"{r:.2g}"

@@ -340,7 +340,7 @@ def test_the_rrmse_rise_scatter_is_a_jackknife_over_the_check_packings():
     jackknife's scatter, worked here by hand from the leave-one-out RRMSEs."""
     from types import SimpleNamespace
 
-    from pelletdem.loop_selection import _rrmse_all, _without, rrmse_rise_se
+    from pelletdem.loop_check import rrmse_all, rrmse_rise_se, without_packing
 
     sim = FunctionSimulator(toy)
     data = synthetic_dataset(sim, TRUTH, FIT + HELD, noise=0.02, compaction_points=4,
@@ -350,8 +350,8 @@ def test_the_rrmse_rise_scatter_is_a_jackknife_over_the_check_packings():
     a = SimpleNamespace(check=sim.predict(START, FIT + HELD, seeds))
     b = SimpleNamespace(check=sim.predict(TRUTH, FIT + HELD, seeds))
     assert rrmse_rise_se(a, a, fit_data, held) == 0.0
-    d = np.array([_rrmse_all(_without(b.check, j), fit_data, held) - _rrmse_all(_without(a.check, j), fit_data, held)
-                  for j in range(4)])
+    d = np.array([rrmse_all(without_packing(b.check, j), fit_data, held)
+                  - rrmse_all(without_packing(a.check, j), fit_data, held) for j in range(4)])
     se = rrmse_rise_se(a, b, fit_data, held)
     assert se > 0 and se == pytest.approx(math.sqrt(3 / 4 * np.sum((d - d.mean()) ** 2)), rel=1e-12)
     # fewer than three packings: no tolerance
@@ -366,7 +366,7 @@ def test_the_rrmse_rise_scatter_of_one_observation_is_the_standard_error_of_a_me
     from types import SimpleNamespace
 
     from pelletdem.loop import Condition, Dataset, Observation
-    from pelletdem.loop_selection import rrmse_rise_se
+    from pelletdem.loop_check import rrmse_rise_se
     from pelletdem.loop_simulators import Ensemble
 
     cond = Condition(60e6)
@@ -393,8 +393,8 @@ def test_new_pellets_make_the_fresh_chi2_scatter_more_than_the_same_pellets_do()
     does), and its change scatters with them."""
     from types import SimpleNamespace
 
+    from pelletdem.loop_check import check_chi2_se, without_packing
     from pelletdem.loop_models import chi2_of, ensemble_z
-    from pelletdem.loop_selection import _without, check_chi2_se
 
     sim = FunctionSimulator(toy)
     data = synthetic_dataset(sim, TRUTH, FIT + HELD, noise=0.02, compaction_points=4,
@@ -415,7 +415,7 @@ def test_new_pellets_make_the_fresh_chi2_scatter_more_than_the_same_pellets_do()
     def chi2(check):
         return chi2_of(ensemble_z(check, fit_data)) + chi2_of(ensemble_z(check, held))
 
-    d = np.array([chi2(_without(new.check, j)) - chi2(_without(base.check, j)) for j in range(6)])
+    d = np.array([chi2(without_packing(new.check, j)) - chi2(without_packing(base.check, j)) for j in range(6)])
     assert unpaired == pytest.approx(math.sqrt(5 / 6 * np.sum((d - d.mean()) ** 2)), rel=1e-12)
 
 
