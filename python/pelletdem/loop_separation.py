@@ -14,6 +14,10 @@ falls as 1/n), n D* / D replicates name it with probability 0.95, D* = (2 z_0.95
 
 Delta_i is estimated from the two models' predictions on the same fresh packings: the mean of
 the paired differences, less its own variance (the packings' noise would otherwise add to D).
+
+D is between the two fitted models. Each fit carries its own packings' luck, so neither need
+be the truth: where D is large and the two still tie on fresh packings, the fits, not the
+data's noise, tie them, and more replicates would not help.
 """
 from __future__ import annotations
 
@@ -81,10 +85,12 @@ def statement(added: str, rival: str, d: float, k: int = 0, diff: float = math.n
            "in the data's standard errors, less the packings' noise)")
     if d <= 0:
         out += ": they predict the same here, and no number of replicates of these conditions would tell them apart"
+    elif d < SURE:
+        out += (f": even were one of them the truth, data like these would name it only {100 * chance_right(d):.0f} % "
+                f"of the time, and x{_times(replicates_factor(d))} the replicates 19 times in 20")
     else:
-        out += (f": were both models' means known exactly, data like these would name the right one of the two "
-                f"{100 * chance_right(d):.0f} % of the time"
-                + (f", and x{_times(replicates_factor(d))} the replicates 19 times in 20" if d < SURE else ""))
+        out += (": data like these could tell these two fitted models apart, so what ties them is how each was "
+                "fitted (each fit carries its own packings' luck), not the data's noise")
     if k > 0:
         out += (f"; on the {k} fresh packings that decided, {rival}'s chi2 is {diff:.1f} above {added}'s, with a "
                 f"scatter of {scatter:.1f} between the packings")
