@@ -39,8 +39,9 @@ procedure is forward selection:
    re-packs the pellet at every strength, and the fit may pick the strength whose packing
    happens to match; the check's packings are new at every strength alike. The best accepted
    candidate (lowest chi2 on the check seeds) is added, even if what remains is still
-   structured, with the others it cannot be told from named beside it (:func:`pick`), and the
-   loop goes back to 3 with the rest, up to ``max_effects``.
+   structured, with the others it cannot be told from named beside it (:func:`pick`); those
+   tied with it are first checked again on as many packings more, where the lower chi2
+   decides. The loop goes back to 3 with the rest, up to ``max_effects``.
 6. **Report** every step: residual, screening, full fits, the effect added and why the others
    were not, errors before and after on fit and held-out data, and what the data could have
    revealed of each candidate (:func:`pelletdem.loop_screen.detection_power`).
