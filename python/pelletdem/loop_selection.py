@@ -68,7 +68,7 @@ from .loop_separation import separation, statement
 from .loop_simulators import MAX_WINDOW, Simulator, next_window
 from .residuals import DEFAULT_ALPHA, ResidualSummary, describe
 
-__all__ = ["FIT_SEEDS", "CHECK_SEEDS", "MAX_WINDOW", "unfailed", "Trial", "Step", "LoopResult", "close_loop",
+__all__ = ["FIT_SEEDS", "CHECK_SEEDS", "MAX_WINDOW", "unfailed", "fit_window", "Trial", "Step", "LoopResult", "close_loop",
            "describe_residual", "Gates", "judge", "pick", "rrmse_rise_se", "check_chi2_se"]
 
 #: Times the baseline's box is widened where its fit is pinned at an end (pelletdem.loop_box).
@@ -164,7 +164,7 @@ SCALAR_REACH = 2.0
 SCALAR_BREAK_DROP = 0.5
 
 
-def _fit_window(sim: Simulator, data: Dataset, say: Callable[[str], None]) -> str:
+def fit_window(sim: Simulator, data: Dataset, say: Callable[[str], None]) -> str:
     """Fit the simulator's diametral window (``max_dLD``, ``widen``) to the data's reach (their
     last curve point and dL_f/D, plus 10 %) before any fit: wider when the data go further,
     narrower when they stop short (a test's cost grows with its length; a model that then
@@ -441,7 +441,7 @@ def close_loop(sim: Simulator, data: Dataset, base_bounds: Mapping[str, Sequence
         return fit_model(sim, space, effects, fit_data, heldout, fit_seeds, check_seeds, start_params, n, say,
                          shared=shared, noise=noise)
 
-    window_note = _fit_window(sim, fit_data, say)
+    window_note = fit_window(sim, fit_data, say)
     model = fit(Space(axes), (), dict(start) if start else None)
     # a fitted model that does not fail inside the test window shows the bond effects nothing
     # (its "peak" is the end of the test): widen the window where the simulator can
