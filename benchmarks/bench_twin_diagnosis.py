@@ -100,11 +100,13 @@ def main(argv=None) -> int:
             lines.append(f"| {m} | {chi2_of(z):.1f} | " + ", ".join(f"{v:.1f}" for v in parts) + " | "
                          + ", ".join(f"{k} {v:.4g}" for k, v in models[m].items()) + " |")
         names = list(ens)
-        lines += ["", f"{len(data)} observations. D between the models (in the data's SE, less the packings' noise):", ""]
+        lines += ["", f"{len(data)} observations. D between the models (in the data's SE, less the packings' "
+                  "noise):", ""]
         lines += [f"- {names[i]} and {names[j]}: D = {separation(ens[names[i]], ens[names[j]], data):.1f}"
                   for i in range(len(names)) for j in range(i + 1, len(names))]
         luck = data_luck(sim, truth, data, seeds, fresh)
-        lines += ["", "The data's own packings against the fresh ones (the truth, no measurement noise; |z| > 1.5):", ""]
+        lines += ["", "The data's own packings against the fresh ones (the truth, no measurement noise; "
+                  "|z| > 1.5):", ""]
         lines += [f"- {c}, {q}" + (f" at {x:.3f}" if math.isfinite(x) else "") + f": z = {z:+.2f}"
                   for c, q, x, z in luck if abs(z) > 1.5]
         lines += ["", f"simulations run: {sim.n_simulations}"]

@@ -68,8 +68,8 @@ from .loop_separation import separation, statement
 from .loop_simulators import MAX_WINDOW, Simulator, next_window
 from .residuals import DEFAULT_ALPHA, ResidualSummary, describe
 
-__all__ = ["FIT_SEEDS", "CHECK_SEEDS", "MAX_WINDOW", "unfailed", "fit_window", "Trial", "Step", "LoopResult", "close_loop",
-           "describe_residual", "Gates", "judge", "pick", "rrmse_rise_se", "check_chi2_se"]
+__all__ = ["FIT_SEEDS", "CHECK_SEEDS", "MAX_WINDOW", "unfailed", "fit_window", "Trial", "Step", "LoopResult",
+           "close_loop", "describe_residual", "Gates", "judge", "pick", "rrmse_rise_se", "check_chi2_se"]
 
 #: Times the baseline's box is widened where its fit is pinned at an end (pelletdem.loop_box).
 MAX_WIDEN = 2
