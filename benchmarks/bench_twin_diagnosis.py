@@ -72,7 +72,7 @@ def main(argv=None) -> int:
 
     from pelletdem import loop
     from pelletdem.engine import BondLaw
-    from pelletdem.loop_cli import SYNTHETIC_BOND, WINDOW, synthetic_design, synthetic_truth
+    from pelletdem.loop_cli import SYNTHETIC_BOND, WINDOW, synthetic_data, synthetic_design, synthetic_truth
     from pelletdem.loop_models import chi2_of, ensemble_z
     from pelletdem.loop_selection import fit_window
     from pelletdem.loop_separation import separation
@@ -81,14 +81,13 @@ def main(argv=None) -> int:
         out = json.load(fh)
     hidden = synthetic_truth(a.case)
     conds, held, seeds = synthetic_design(hidden, a.draw)
-    truth = {"E_b": SYNTHETIC_BOND["youngs_modulus"], "sigma_c": SYNTHETIC_BOND["sigma_c"], **hidden}
     fresh = tuple(100 + j for j in range(a.packings))
     cache = os.path.join(a.out, "cache")
     lines = [f"# {a.case}, draw {a.draw}: the models on {a.packings} fresh packings", ""]
     with loop.EngineSimulator("tiny", bond=BondLaw(**SYNTHETIC_BOND), contact={}, seeds=tuple(range(out["packings"])),
                               max_dLD=WINDOW, max_workers=a.workers, cache_dir=cache,
                               relaxed_dir=os.path.join(cache, "relaxed")) as sim:
-        data = loop.synthetic_dataset(sim, truth, conds, seeds=seeds, noise=0.02, compaction_points=4, seed=a.draw)
+        data, truth = synthetic_data(sim, hidden, a.draw)
         fit_window(sim, data.split(lambda c: c in held)[0], lambda s: None)
         models = models_of(out, truth)
         ens = {m: sim.predict(p, conds, fresh) for m, p in models.items()}

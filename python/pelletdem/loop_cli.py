@@ -36,6 +36,10 @@ SYNTHETIC_MOISTURE = ((60e6, 8.0), (120e6, 8.0), (120e6, 20.0), (60e6, 20.0))
 #: The diametral test window (dL/D) the loop starts with (synthetic data are made to it); it is
 #: then fitted to the data's reach, and widened when the fitted model does not fail inside.
 WINDOW = 0.25
+#: Relative measurement noise of synthetic data (--noise), and the compaction curve points
+#: each synthetic condition gives.
+NOISE = 0.02
+COMPACTION_POINTS = 4
 
 
 def add_parser(sub) -> None:
@@ -52,7 +56,7 @@ def add_parser(sub) -> None:
                    help="make the data with the engine, with this effect hidden in it "
                         f"({', '.join(EFFECTS)}, none, or any contact.X=V / bond.X=V)")
     p.add_argument("--draw", type=int, default=0, help="synthetic data: which replicate packings and noise (0..999)")
-    p.add_argument("--noise", type=float, default=0.02, help="synthetic data: relative measurement noise")
+    p.add_argument("--noise", type=float, default=NOISE, help="synthetic data: relative measurement noise")
     p.add_argument("--materials", default="oak", help="paper data: comma-separated materials")
     p.add_argument("--held-out", default=None, metavar="KEY=V[,KEY=V]",
                    help="paper data: the variants held out, by mc (%%), sigma_z (MPa) and material "
@@ -120,6 +124,19 @@ def synthetic_design(truth: dict, draw: int):
     offset = {mc: 500 * k for k, mc in enumerate(sorted({c.mc for c in conds}))}
     seeds = {c: tuple(s + 10 * draw + offset[c.mc] for s in DATA_SEEDS) for c in conds}
     return conds, (conds[-1],), seeds
+
+
+def synthetic_data(sim, truth: dict, draw: int, noise: float = NOISE):
+    """(Dataset, hidden parameters (SI)) of ``--synthetic`` data hiding the law fields
+    ``truth`` (:func:`synthetic_truth`) in draw ``draw``, made by ``sim`` with relative
+    measurement noise ``noise`` (-) as :func:`synthetic_design` lays them out."""
+    from . import loop
+
+    conds, _, seeds = synthetic_design(truth, draw)
+    hidden = {"E_b": SYNTHETIC_BOND["youngs_modulus"], "sigma_c": SYNTHETIC_BOND["sigma_c"], **truth}
+    data = loop.synthetic_dataset(sim, hidden, conds, seeds=seeds, noise=noise, compaction_points=COMPACTION_POINTS,
+                                  seed=draw)
+    return data, hidden
 
 
 def _check(args) -> None:
@@ -238,11 +255,7 @@ def run(args, title: str = "Discrepancy loop on") -> int:
                                   cache_dir=cache, relaxed_dir=os.path.join(cache, "relaxed"),
                                   particle_density=density) as sim:
             if isinstance(data, tuple):
-                conds, truth = data
-                seeds = synthetic_design(truth, args.draw)[2]
-                hidden = {"E_b": SYNTHETIC_BOND["youngs_modulus"], "sigma_c": SYNTHETIC_BOND["sigma_c"], **truth}
-                data = loop.synthetic_dataset(sim, hidden, conds, seeds=seeds, noise=args.noise,
-                                              compaction_points=4, seed=args.draw)
+                data = synthetic_data(sim, data[1], args.draw, args.noise)[0]
             res = loop.close_loop(sim, data, bounds, start, held_out=lambda c: c in held,
                                   fit_seeds=tuple(range(args.packings)),
                                   check_seeds=tuple(100 + k for k in range(args.packings)),

@@ -78,6 +78,23 @@ def test_a_moisture_effect_is_hidden_in_data_of_two_moisture_contents_from_other
         assert h == (c[-1],) and set(s.values()) == {tuple(k + 10 for k in DATA_SEEDS)}
 
 
+def test_the_command_lines_synthetic_data_hide_the_truth_in_the_draws_packings():
+    from pelletdem.loop_cli import SYNTHETIC_BOND, synthetic_data, synthetic_design, synthetic_truth
+
+    seen = set()
+    sim = FunctionSimulator(lambda p, c, s: (seen.add(s), toy(p, c, s))[1])
+    truth = synthetic_truth("none")
+    data, hidden = synthetic_data(sim, truth, 3, noise=0.0)
+    conds, _, seeds = synthetic_design(truth, 3)
+    assert hidden == {"E_b": SYNTHETIC_BOND["youngs_modulus"], "sigma_c": SYNTHETIC_BOND["sigma_c"]}
+    assert seen == set(seeds[conds[0]]) and {o.condition for o in data.observations} == set(conds)
+    # without noise each number is the truth's mean over the draw's replicate packings
+    o = next(o for o in data.observations if o.quantity == "sigma_f")
+    assert o.value == pytest.approx(sim.predict(hidden, [o.condition], seeds[o.condition])[o.condition].mean_se(o)[0])
+    # another draw: other packings, other numbers
+    assert synthetic_data(sim, truth, 4, noise=0.0)[0].values[0] != data.values[0]
+
+
 class _Window(FunctionSimulator):
     """The toy pellet behind a test window: a replicate fails inside it only from dL/D
     ``needs`` on (a ductile pellet), as the engine's tests end at max_dLD."""
