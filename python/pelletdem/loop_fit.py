@@ -33,7 +33,7 @@ import numpy as np
 from .loop_data import Dataset
 from .loop_emulator import Emulator
 
-__all__ = ["EmulatedFit", "welch_z", "misfit", "fit_emulated", "profile"]
+__all__ = ["EmulatedFit", "welch_z", "misfit", "fit_emulated", "profile_grid", "profile"]
 
 #: Degrees of freedom of an SD pooled over a whole design (many packings at many points).
 POOLED_DOF = 1e3
@@ -178,19 +178,40 @@ def fit_emulated(emulator: Emulator, data: Dataset, start: Optional[Sequence[flo
                        widen=widen, jac=J)
 
 
+#: Half-width of the fine part of a profile, in the fitted parameter's standard errors.
+PROFILE_FINE_REACH = 4.5
+#: Positions in the fine part of a profile.
+PROFILE_FINE_POINTS = 31
+
+
+def profile_grid(u: float, sd: float, n: int = 41) -> np.ndarray:
+    """Unit positions (ascending, in [0, 1]) at which a profile is evaluated: ``n`` across the
+    whole axis, the fitted position ``u`` itself, and :data:`PROFILE_FINE_POINTS` within
+    :data:`PROFILE_FINE_REACH` of the fit's standard error ``sd`` (unit box) either side.
+    The fine part matters where the data pin a strength down to less than a coarse cell: an
+    interval read by straight lines between coarse points of a convex profile cuts each
+    crossing short (with the crossing at 2 sd and a cell of h, at 4 sd^2 / h instead of 2 sd)."""
+    grid = [np.linspace(0.0, 1.0, n), [u]]
+    if math.isfinite(sd) and sd > 0:
+        grid.append(u + sd * np.linspace(-PROFILE_FINE_REACH, PROFILE_FINE_REACH, PROFILE_FINE_POINTS))
+    return np.unique(np.clip(np.concatenate(grid), 0.0, 1.0))
+
+
 def profile(emulator: Emulator, data: Dataset, fit: EmulatedFit, name: str, n: int = 41) -> EmulatedFit:
-    """The chi2 profile of parameter ``name``: at ``n`` positions along its axis, chi2
-    minimised over the other parameters (on the emulator, from the fitted position). Stored
-    in ``fit.profiles[name]`` as (values SI, chi2), where :meth:`EmulatedFit.interval` reads
-    it: a weakly constrained strength gets the lopsided interval its data allow rather than a
-    symmetric standard error. Returns ``fit``."""
+    """The chi2 profile of parameter ``name``: chi2 minimised over the other parameters (on the
+    emulator, from the fitted position) at the positions of :func:`profile_grid` (``n`` across
+    its axis, finer near the fit). Stored in ``fit.profiles[name]`` as (values SI, chi2),
+    where :meth:`EmulatedFit.interval` reads it: a weakly constrained strength gets the
+    lopsided interval its data allow rather than a symmetric standard error. Returns ``fit``."""
     from scipy.optimize import least_squares
 
     names = emulator.space.names
     k = names.index(name)
     d = emulator.space.dim
     others = [j for j in range(d) if j != k]
-    grid = np.linspace(0.0, 1.0, n)
+    var = float(fit.cov[k, k]) if fit.cov is not None and np.ndim(fit.cov) == 2 else float("nan")
+    grid = profile_grid(float(fit.u[k]), math.sqrt(var) if var > 0 else float("nan"), n)
+    n = len(grid)
     chi2 = np.empty(n)
     order = np.argsort(np.abs(grid - fit.u[k]))  # outwards from the fit, each start the nearest done
     done: Dict[int, np.ndarray] = {}

@@ -87,3 +87,31 @@ def test_correlated_misfits_widen_the_errors_by_the_sandwich():
     lo, hi = corr.interval("E_b")
     lo0, hi0 = plain.interval("E_b")
     assert lo <= lo0 and hi >= hi0
+
+
+def _linear_one_parameter(sd_unit: float):
+    """An emulator of one observation y = u (unit box, linear axis) and data at u = 0.4 with a
+    standard error of ``sd_unit``: chi2(u) = ((u - 0.4) / sd_unit)^2 exactly, so the 2-sigma
+    interval is 0.4 +- 2 sd_unit of the box."""
+    space = Space((Axis("c", 0.0, 1.0, log=False),))
+    U = np.linspace(0.0, 1.0, 12)[:, None]
+    emu = Emulator(space, U, U.copy(), np.full_like(U, 1e-9))
+    data = Dataset([Observation(Condition(120e6), "bulk_density", math.nan, 0.4, sd_unit * 1e3, 1_000_000)])
+    return emu, data
+
+
+@pytest.mark.parametrize("sd_unit", [0.001, 0.003, 0.05])
+def test_a_profile_interval_is_the_parabolas_whatever_the_coarse_grid(sd_unit):
+    # the coarse grid's cells are 0.025 of the box: an interval of a few thousandths lies
+    # inside one, and straight lines between its points would cut it short
+    from pelletdem.loop_fit import profile
+
+    emu, data = _linear_one_parameter(sd_unit)
+    fit = profile(emu, data, fit_emulated(emu, data, start=[0.5]), "c")
+    assert fit.u[0] == pytest.approx(0.4, abs=0.05 * sd_unit)
+    assert fit.se["c"] == pytest.approx(sd_unit, rel=0.02)
+    lo, hi = fit.interval("c")
+    assert lo == pytest.approx(0.4 - 2 * sd_unit, abs=0.03 * sd_unit)
+    assert hi == pytest.approx(0.4 + 2 * sd_unit, abs=0.03 * sd_unit)
+    lo3, hi3 = fit.interval("c", k=3.0)
+    assert hi3 - lo3 == pytest.approx(6 * sd_unit, rel=0.03)
