@@ -209,7 +209,7 @@ def profile(emulator: Emulator, data: Dataset, fit: EmulatedFit, name: str, n: i
     k = names.index(name)
     d = emulator.space.dim
     others = [j for j in range(d) if j != k]
-    var = float(fit.cov[k, k]) if fit.cov is not None and np.ndim(fit.cov) == 2 else float("nan")
+    var = float(fit.cov[k, k])
     grid = profile_grid(float(fit.u[k]), math.sqrt(var) if var > 0 else float("nan"), n)
     n = len(grid)
     chi2 = np.empty(n)

@@ -9,7 +9,7 @@ from scipy import stats
 
 from pelletdem.loop import Condition, Dataset, Observation
 from pelletdem.loop_emulator import Axis, Emulator, Space, design
-from pelletdem.loop_fit import fit_emulated, welch_z
+from pelletdem.loop_fit import fit_emulated, profile, welch_z
 
 
 def test_welch_z_is_the_t_statistic_when_both_errors_are_well_known():
@@ -104,8 +104,6 @@ def _linear_one_parameter(sd_unit: float):
 def test_a_profile_interval_is_the_parabolas_whatever_the_coarse_grid(sd_unit):
     # the coarse grid's cells are 0.025 of the box: an interval of a few thousandths lies
     # inside one, and straight lines between its points would cut it short
-    from pelletdem.loop_fit import profile
-
     emu, data = _linear_one_parameter(sd_unit)
     fit = profile(emu, data, fit_emulated(emu, data, start=[0.5]), "c")
     assert fit.u[0] == pytest.approx(0.4, abs=0.05 * sd_unit)
