@@ -70,6 +70,17 @@ class EmulatedFit:
     #: The fitted position's covariance over the fit packings left out in turn (unit box
     #: squared, :mod:`pelletdem.loop_jackknife`); None when not measured.
     jackknife: Optional[np.ndarray] = None
+    #: Per profiled parameter, the whole position (unit box) where its profile's chi2 is
+    #: lowest: where a fit that is only a local minimum of its emulator is left for.
+    profile_best: Dict[str, np.ndarray] = field(default_factory=dict)
+
+    def below_fit(self, name: str) -> float:
+        """How far (chi2) the lowest point of ``name``'s profile lies below the fit itself; 0
+        when it does not (or ``name`` was not profiled). A fit that is the emulator's global
+        minimum has 0 up to the optimiser's tolerance: more means a better minimum elsewhere."""
+        if name not in self.profiles:
+            return 0.0
+        return max(0.0, self.chi2 - float(np.min(self.profiles[name][1])))
 
     def interval(self, name: str, k: float = 2.0) -> tuple:
         """(low, high) of parameter ``name`` (SI): where its profile's chi2 stays within k^2
@@ -202,7 +213,8 @@ def profile(emulator: Emulator, data: Dataset, fit: EmulatedFit, name: str, n: i
     emulator, from the fitted position) at the positions of :func:`profile_grid` (``n`` across
     its axis, finer near the fit). Stored in ``fit.profiles[name]`` as (values SI, chi2),
     where :meth:`EmulatedFit.interval` reads it: a weakly constrained strength gets the
-    lopsided interval its data allow rather than a symmetric standard error. Returns ``fit``."""
+    lopsided interval its data allow rather than a symmetric standard error; the whole
+    position of its lowest point in ``fit.profile_best[name]``. Returns ``fit``."""
     from scipy.optimize import least_squares
 
     names = emulator.space.names
@@ -232,4 +244,7 @@ def profile(emulator: Emulator, data: Dataset, fit: EmulatedFit, name: str, n: i
             done[i], chi2[i] = x0, float(np.sum(z(x0) ** 2))
     axis = emulator.space.axes[k]
     fit.profiles[name] = (np.array([axis.from_unit(g) for g in grid]), chi2)
+    best = int(np.argmin(chi2))
+    fit.profile_best[name] = np.empty(d)
+    fit.profile_best[name][k], fit.profile_best[name][others] = grid[best], done[best]
     return fit

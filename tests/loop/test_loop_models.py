@@ -77,3 +77,50 @@ def test_a_fit_without_refinement_has_no_move_to_report():
     sim = FunctionSimulator(_wavy_pellet, default_seeds=(0, 1, 2))
     mf = fit_model(sim, SPACE, (), DATA, None, (0, 1, 2), (10, 11, 12), n_design=4, refine=0)
     assert math.isnan(mf.last_move) and mf.settled
+
+
+# Two wells along a candidate's strength s (unit axis): the density's misfit is 0 at s = 0.2
+# and 3 SE at s = 0.9 (chi2 9 above), with a barrier between; sigma_f pins E_b at any s.
+TWO_WELLS = Space((Axis("E_b", 1e7, 1e9, True), Axis("s", 0.0, 1.0, False)))
+CONDS = (Condition(60e6), Condition(120e6))
+WELL_DATA = Dataset([Observation(c, q, float("nan"), v, se, 5) for c in CONDS
+                     for q, v, se in (("sigma_f", 1.0e6, 2e4), ("bulk_density", 600.0, 5.0))])
+
+
+def _two_wells(params, cond, seed):
+    s, x = params["s"], math.log10(params["E_b"]) - 8.0  # x in [-1, 1]
+    well = 10.0 * (s - 0.2) * (s - 0.9)
+    return Prediction(scalars={"sigma_f": 1e6 * (1.0 + 0.3 * (x - 0.2 * s)) + 10.0 * seed,
+                               "bulk_density": 600.0 + 5.0 * (3.0 * well ** 2 + 3.0 * (s - 0.2) / 0.7)
+                               + 0.01 * seed})
+
+
+def _stuck_first(monkeypatch):
+    """fit_model's fits held to their start's own basin (no design-point starts): where a
+    multistart lands when none of its design points lies in the better basin."""
+    import pelletdem.loop_models as lm
+
+    real = lm.fit_emulated
+    monkeypatch.setattr(lm, "fit_emulated", lambda emu, data, start=None, starts=3, corr=None:
+                        real(emu, data, start, starts=0, corr=corr))
+
+
+def test_a_fit_the_profile_shows_to_be_a_local_minimum_is_fitted_again_from_the_profiles_best(monkeypatch):
+    import pelletdem.loop_models as lm
+    from pelletdem.loop_noise import PackingNoise
+
+    _stuck_first(monkeypatch)
+    sim = FunctionSimulator(_two_wells, default_seeds=(0, 1, 2))
+    args = (sim, TWO_WELLS, ("toy",), WELL_DATA, None, (0, 1, 2), (10, 11, 12))
+    kw = dict(start={"E_b": 1e8, "s": 0.9}, n_design=24, refine=2, noise=PackingNoise.independent())
+    monkeypatch.setattr(lm, "ESCAPE_CHI2", math.inf)
+    stuck = fit_model(*args, **kw).fit
+    assert stuck.params["s"] > 0.8 and stuck.below_fit("s") > 5.0  # the profile sees the other well
+    monkeypatch.setattr(lm, "ESCAPE_CHI2", 1.0)
+    lines = []
+    fit = fit_model(*args, log=lines.append, **kw).fit
+    assert any("the fit was a local minimum; fitted again from there" in s for s in lines)
+    assert abs(fit.params["s"] - 0.2) < 0.05 and fit.chi2 < stuck.chi2 - 5.0
+    assert fit.below_fit("s") <= 1.0
+    lo, hi = fit.interval("s")
+    assert lo < 0.2 < hi and hi < 0.55  # the interval is the good well's, and holds its fit
