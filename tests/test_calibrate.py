@@ -357,6 +357,20 @@ def test_compaction_targets_pool_table2():
     assert tg[0].bulk_density_sd > np.std(bd60, ddof=1)
 
 
+def test_compaction_targets_ask_one_solid_fraction_of_woods_of_different_density():
+    from pelletdem.measured import variants
+
+    at = {v.key: 680.0 * v.bd_pellet / v.bd_wood for v in variants()}  # BD_p / BD_w at 680 kg/m^3
+    tg = C.compaction_targets(particle_density=680.0)
+    assert tg[1].bulk_density == pytest.approx(np.mean([d for k, d in at.items() if k[2] == 120]))
+    oak = [("oak", 8, 60), ("oak", 20, 60)]
+    one = C.compaction_targets(oak, particle_density=675.0)  # oak's own BD_w: Table 2 unchanged
+    assert one[0].bulk_density == pytest.approx(np.mean([v.bd_pellet for v in variants() if v.key in oak]))
+    for bad in (0.0, -1.0, float("nan")):
+        with pytest.raises(ValueError, match="particle_density"):
+            C.compaction_targets(particle_density=bad)
+
+
 # --- fits ----------------------------------------------------------------------------------
 
 def test_fit_recovers_two_parameters_of_power_law_model():

@@ -9,6 +9,7 @@ engine of test_calibrate.py; one real `tiny` calibration of one variant runs in 
 from __future__ import annotations
 
 import json
+import math
 import os
 import subprocess
 import sys
@@ -70,6 +71,9 @@ def _main(argv):
     (["--dask", " "], "--dask", "tcp://"),
     (["--preset", "huge"], "--preset", "tiny"),
     (["--max-runs", "2.5"], "--max-runs", "int"),
+    (["--packings", "0"], "--packings", "1..64"),
+    (["--packings", "65"], "--packings", "1..64"),
+    (["--data", "example", "--packings", "1"], "--packings", "2..64"),
 ])
 def test_bad_arguments_exit_2_naming_the_argument_before_any_work(extra, name, allowed, no_calibration, capsys,
                                                                   tmp_path):
@@ -148,6 +152,10 @@ def test_arguments_reach_the_calibration(no_calibration, monkeypatch, tmp_path):
     assert _main(["calibrate", out]) == 0
     (_, kw), = no_calibration
     assert kw["preset"] == "tiny" and kw["variants"] is None and kw["executor"] is None and kw["source"] is None
+    assert kw["packings"] == 1
+    no_calibration.clear()
+    assert _main(["calibrate", out, "--packings", "3"]) == 0
+    assert no_calibration[0][1]["packings"] == 3
 
 
 def test_calibrate_help_lists_every_option(capsys):
@@ -189,6 +197,35 @@ def test_calibrate_into_writes_its_files_and_resumes_from_its_cache(tmp_path):
     other = calibration_dir.calibrate_into(out, VARIANTS, "tiny", max_runs=3, compaction_runs=2, executor="serial",
                                            runner=power_law_runner, log=lambda s: None)
     assert other.n_simulations > 0
+
+
+def test_calibrate_into_averages_packings_and_gives_each_wood_its_density(tmp_path):
+    """Packings differ by 10 kg/m^3 in density: the mean is 5 above packing 0's and its
+    standard error 5; each variant's pellet is the solid fraction times its wood's BD_w, and
+    the paper's variants run with the paper's overlap guard."""
+    from pelletdem.loop_paper import PAPER_OVERLAP_GUARD
+    from pelletdem.measured import variant
+
+    guards = set()
+
+    def runner(spec):
+        guards.add(spec.preset.max_overlap_ratio)
+        rec = power_law_runner(spec)
+        rec["outputs"]["bulk_density_relaxed"] += 10.0 * spec.seed
+        return rec
+
+    rep = calibration_dir.calibrate_into(tmp_path / "cal", VARIANTS, "tiny", max_runs=2, compaction_runs=0,
+                                         packings=2, executor="serial", runner=runner, log=lambda s: None)
+    assert guards == {PAPER_OVERLAP_GUARD}
+    assert json.loads((tmp_path / "cal" / "calibration.json").read_text())["packings"] == 2
+    for (m, mc, sz), row in zip(VARIANTS, rep.table.itertuples()):
+        v, solid = variant(m, mc, sz), 800.0 * (sz / 120) ** 0.25 + 5.0  # k1 is tiny's 1e5
+        assert row.bd_sim == pytest.approx(solid * v.bd_wood / 680.0)
+        assert row.bd_se == pytest.approx(5.0 * v.bd_wood / 680.0)
+        sd = math.hypot(max(v.bd_pellet_sd, 0.01 * v.bd_pellet), row.bd_se)
+        assert row.z_bd == pytest.approx((row.bd_sim - v.bd_pellet) / sd)
+    with pytest.raises(ValueError, match="packings"):
+        calibration_dir.calibrate_into(tmp_path / "bad", VARIANTS, "tiny", packings=0, runner=runner)
 
 
 def test_calibrate_into_from_an_earlier_calibration(tmp_path):

@@ -32,6 +32,8 @@ from typing import Optional
 #: preset's k1): 'tiny' with these takes a few minutes on two cores.
 MAX_RUNS = 4
 COMPACTION_RUNS = 2
+#: Packings every prediction averages with --data (the loop's baseline needs at least two).
+DATA_PACKINGS = 4
 #: Allowed ranges of the counts, inclusive.
 LIMITS = {"max_runs": (1, 100), "compaction_runs": (0, 100), "workers": (1, 256)}
 #: Bond-law parameters the calibration fits, so --set cannot fix them (tau_c follows sigma_c).
@@ -64,8 +66,9 @@ def add_arguments(p: argparse.ArgumentParser, *, preset: str = "tiny", max_runs:
     p.add_argument("--data", default=None, metavar="FILE|example",
                    help="calibrate against a user's data (a loop manifest, docs/loop.md) instead of the "
                         "paper's variants")
-    p.add_argument("--packings", type=int, default=4, metavar="N",
-                   help="with --data: packings every prediction averages (2..64; default 4)")
+    p.add_argument("--packings", type=int, default=None, metavar="N",
+                   help=f"packings every point averages (the paper's variants: 1..64, default 1; "
+                        f"with --data: 2..64, default {DATA_PACKINGS})")
     p.add_argument("--set", action="append", default=[], metavar="LAW.NAME=VALUE",
                    help="set a contact or bond law parameter, e.g. contact.mu=0.4 (SI units; repeatable; "
                         "not the fitted bond.youngs_modulus, bond.sigma_c, bond.tau_c)")
@@ -130,8 +133,10 @@ def check(args) -> dict:
         for flag, given in (("--variant", args.variant), ("--from", args.source)):
             if given:
                 raise ValueError(f"{flag} is for the paper's variants; with --data the manifest says what is fitted")
-        if not 2 <= args.packings <= 64:
-            raise ValueError(f"--packings = {args.packings} is out of range: allowed 2..64")
+        if args.packings is not None and not 2 <= args.packings <= 64:
+            raise ValueError(f"--packings = {args.packings} is out of range: allowed 2..64 with --data")
+    elif args.packings is not None and not 1 <= args.packings <= 64:
+        raise ValueError(f"--packings = {args.packings} is out of range: allowed 1..64")
     for name in settings:
         if name in FITTED:
             raise ValueError(f"--set {name}: the calibration fits {FITTED[name]} per variant; "
@@ -158,8 +163,8 @@ def check(args) -> dict:
             raise ValueError("--dask needs Dask's distributed package, which is not installed: "
                              "pip install distributed")
     return dict(variants=variants, preset=args.preset or args.preset_default, max_runs=args.max_runs,
-                compaction_runs=args.compaction_runs, source=args.source, settings=settings,
-                max_workers=args.workers)
+                compaction_runs=args.compaction_runs, packings=args.packings or 1, source=args.source,
+                settings=settings, max_workers=args.workers)
 
 
 def run(args) -> int:
@@ -194,6 +199,6 @@ def _fit_user_data(args) -> int:
     ns = argparse.Namespace(out=args.out, data=args.data, synthetic=None, draw=0, noise=0.02, materials="oak",
                             held_out=None, fit=[],
                             set=list(args.set), preset=args.preset,
-                            packings=args.packings, max_effects=0, window=loop_cli.WINDOW,
+                            packings=args.packings or DATA_PACKINGS, max_effects=0, window=loop_cli.WINDOW,
                             workers=args.workers, dask=args.dask, cache=None)
     return loop_cli.run(ns, title="Calibration on")

@@ -22,7 +22,7 @@ from .law_settings import apply_settings
 from .laws import BondLaw
 from .objectives import as_variants
 from .run_cache import RunCache
-from .runs import PARAMETERS, RunSpec, as_preset, check_positive
+from .runs import PARAMETERS, RunSpec, check_positive
 from .variants import CalibrationReport, calibrate_variants
 from .worker import run_point
 
@@ -93,7 +93,7 @@ def load_calibration(directory: Union[str, os.PathLike]) -> dict:
 
 
 def calibrate_into(out: Union[str, os.PathLike], variants=None, preset="tiny", *, max_runs: int = 4,
-                   compaction_runs: int = 2, source: Optional[Union[str, os.PathLike]] = None,
+                   compaction_runs: int = 2, packings: int = 1, source: Optional[Union[str, os.PathLike]] = None,
                    settings: Optional[Mapping[str, object]] = None, executor=None,
                    max_workers: Optional[int] = None, runner: Callable[[RunSpec], dict] = run_point,
                    log: Callable[[str], None] = print) -> CalibrationReport:
@@ -102,6 +102,8 @@ def calibrate_into(out: Union[str, os.PathLike], variants=None, preset="tiny", *
     ``out`` (see the module docstring); the same call again resumes from ``out/cache``.
 
     ``max_runs``: parameter points per variant's bond fit (E_b, sigma_c = tau_c).
+    ``packings``: packings (seeds 0..packings-1) every point averages (1..64): a small pellet's
+    own scatter is large, and more packings give the density its standard error.
     ``compaction_runs``: k1 points of the shared compaction fit, within a factor 10 of the
     preset's k1 (0: keep the preset's). ``source``: the ``out`` of an earlier calibration,
     on a smaller preset: its contact law (k1, k2) and bond fits are used in place of the
@@ -109,12 +111,16 @@ def calibrate_into(out: Union[str, os.PathLike], variants=None, preset="tiny", *
     ``settings``: {'contact.X': v, 'bond.Y': w} (SI; :mod:`pelletdem.law_settings`) applied
     to the preset's contact law and the base bond law before fitting. ``executor``,
     ``max_workers``, ``runner``: as in ``calibrate_variants`` (a Dask ``distributed.Client``
-    is an executor). ``log``: where the report's text goes. Returns the
-    :class:`pelletdem.variants.CalibrationReport`.
+    is an executor). ``log``: where the report's text goes. The preset runs with the paper's
+    overlap guard (:func:`pelletdem.loop_paper.paper_preset`), as the loop's paper variants
+    do. Returns the :class:`pelletdem.variants.CalibrationReport`.
     """
     from . import plots
+    from .loop_paper import paper_preset
 
-    p = as_preset(preset)
+    if isinstance(packings, bool) or not isinstance(packings, int) or not 1 <= packings <= 64:
+        raise ValueError(f"packings = {packings!r}: allowed an integer 1..64")
+    p = paper_preset(preset)
     settings = dict(settings or {})
     contact, bond = apply_settings(p.contact, BondLaw(), settings)
     p = p.with_(contact=contact)
@@ -131,12 +137,14 @@ def calibrate_into(out: Union[str, os.PathLike], variants=None, preset="tiny", *
     out.mkdir(parents=True, exist_ok=True)
     sittings = Sittings(out)
     sittings.start()
-    report = calibrate_variants(vs, p, max_runs=max_runs, cache_dir=out / "cache", relaxed_dir=out / "relaxed",
+    report = calibrate_variants(vs, p, max_runs=max_runs, seeds=tuple(range(packings)), cache_dir=out / "cache",
+                                relaxed_dir=out / "relaxed",
                                 executor=executor, max_workers=max_workers, runner=runner, bond=bond, **setup)
     log(str(report))
     report.table.to_csv(out / "calibration.csv", index=False)
     (out / CALIBRATION_FILE).write_text(json.dumps({
-        "preset": p.name, "variants": [v.label for v in vs], "set": settings, "contact": report.contact,
+        "preset": p.name, "variants": [v.label for v in vs], "packings": packings, "set": settings,
+        "contact": report.contact,
         "bond_start": report.bond_start(), "from": os.fspath(source) if source is not None else None,
         "n_simulations": report.n_simulations, "n_cached": report.n_cached,
         "n_relaxations": report.n_relaxations, "wall_time_s": report.wall_time_s,

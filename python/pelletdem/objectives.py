@@ -157,21 +157,29 @@ def score(outputs: Mapping[str, float], target: Targets, curve: Optional[Mapping
     return out
 
 
-def compaction_targets(variants=None, state: str = "relaxed") -> List[Targets]:
+def compaction_targets(variants=None, state: str = "relaxed",
+                       particle_density: Optional[float] = None) -> List[Targets]:
     """One bulk-density target per compaction pressure, shared by all materials (Table 2).
 
     For each pressure of ``variants`` (default the 12): the mean of the variants' pellet bulk
     densities (kg/m^3), and as SD sqrt(mean within-variant SD^2 + SD between the variants'
     means^2): one contact law for all woods cannot do better than the spread between them.
+    ``particle_density`` (kg/m^3, the model particles'): each variant's density (and SD) is
+    first taken to that particle density at the same BD_p / BD_w (Table 2's intact wood), so
+    that woods of different densities ask one contact law for one solid fraction; None keeps
+    Table 2's densities as they are.
     """
     from .paper_tables import variants as all_variants
 
     vs = as_variants(variants) if variants is not None else all_variants()
+    if particle_density is not None:
+        check_positive("particle_density", particle_density, "kg/m^3")
     out = []
     for sz in sorted({v.sigma_z for v in vs}):
         group = [v for v in vs if v.sigma_z == sz]
-        means = np.array([v.bd_pellet for v in group])
-        sds = np.array([v.bd_pellet_sd for v in group])
+        scale = np.array([particle_density / v.bd_wood if particle_density is not None else 1.0 for v in group])
+        means = np.array([v.bd_pellet for v in group]) * scale
+        sds = np.array([v.bd_pellet_sd for v in group]) * scale
         between = float(np.std(means, ddof=1)) if len(means) > 1 else 0.0
         sd = float(math.sqrt(np.mean(sds**2) + between**2))
         out.append(Targets(sigma_z=sz, bulk_density=float(means.mean()), bulk_density_sd=sd,

@@ -42,8 +42,11 @@ class CalibrationReport:
 
     ``table``: one row per variant (pandas DataFrame): the fitted E_b and sigma_c (MPa) beside
     the paper's Table 5 values, the simulated sigma_f (MPa) and dL_f/D beside Table 3's mean and
-    SD with their z-scores, the simulated relaxed bulk density (kg/m^3) beside Table 2's with its
-    z-score, the simulated coordination number beside Table 5's, runs used and convergence.
+    SD with their z-scores, the simulated relaxed bulk density (kg/m^3; the solid fraction
+    times the variant's intact-wood density, Table 2's BD_w; ``bd_se`` its standard error over
+    the packings, NaN with one) beside Table 2's with its z-score (the laboratory's SD, at least
+    1 %, and the model's standard error combined),
+    the simulated coordination number beside Table 5's, runs used and convergence.
     ``compaction``: the shared k1 / p_y fit (:class:`FitResult`, None if skipped) and
     ``contact``: the contact-law overrides used for the bond fits. ``fits``: label ->
     :class:`FitResult`. ``n_simulations``, ``n_cached``, ``n_relaxations``: runs executed, read
@@ -97,8 +100,9 @@ def calibrate_variants(variants=None, preset="tiny", *,
        {'p_y': (lo, hi)} in Pa; 'default' = k1 within a factor 10 of the preset's; None skips
        it) so the simulated ``compaction_state`` ('relaxed' or 'max') bulk density at each
        pressure matches the mean of Table 2's pellet densities over the variants at that
-       pressure (SD: within- and between-variant spread, :func:`compaction_targets`); k2/k1
-       stays fixed (e = 0.5). The paper fitted p_y to the compaction curves instead; Table 2 is
+       pressure, each taken to the preset's particle density at its own BD_p / BD_w (SD:
+       within- and between-variant spread, :func:`compaction_targets`); k2/k1 stays fixed
+       (e = 0.5). The paper fitted p_y to the compaction curves instead; Table 2 is
        what ships with the package.
     2. Per variant, with that contact law: fit ``bond_params`` (default E_b in [1e5, 1e10] Pa,
        sigma_c in [1e4, 1e10] Pa, tau_c = sigma_c) against Table 3's sigma_f and dL_f/D with
@@ -159,7 +163,7 @@ def calibrate_variants(variants=None, preset="tiny", *,
         comp_fit = None
         if compaction is not None:
             vlog("[calibrate] compaction fit")
-            comp_fit = fit(compaction, compaction_targets(vs, compaction_state), preset=p, seeds=seeds,
+            comp_fit = fit(compaction, compaction_targets(vs, compaction_state, p.density), preset=p, seeds=seeds,
                            tol=tol, max_runs=compaction_max_runs, evaluator=ev, verbose=verbose)
             (name, val), = comp_fit.params.items()
             k1 = val if name == "k1" else k1_from_yield_strength(val, p.radius_mean)
@@ -207,10 +211,16 @@ def calibrate_variants(variants=None, preset="tiny", *,
 
         with cf.ThreadPoolExecutor(max_workers=len(vs), thread_name_prefix="calibrate") as drivers:
             fits = dict(zip([v.label for v in vs], drivers.map(one, vs)))
-        dens = {}
+        dens, dens_se = {}, {}
         for sz in sizes:
-            outs, _, good, _ = mean_outputs([f.result() for f in pending[sz]])
+            records = [f.result() for f in pending[sz]]
+            outs, _, good, _ = mean_outputs(records)
             dens[sz] = outs if good else {}
+            key = "bulk_density_" + compaction_state
+            per_seed = [r["outputs"][key] for r in records if r["ok"] and key in r["outputs"]]
+            # the model's own standard error over its packings (none with one packing)
+            dens_se[sz] = (float(np.std(per_seed, ddof=1) / math.sqrt(len(per_seed)))
+                           if good and len(per_seed) > 1 else float("nan"))
 
         stats = ev.stats()
 
@@ -218,7 +228,11 @@ def calibrate_variants(variants=None, preset="tiny", *,
     for v in vs:
         f = fits[v.label]
         outs = f.outputs[0] if f.outputs else {}
-        bd = dens.get(v.sigma_z, {}).get("bulk_density_" + compaction_state, float("nan"))
+        # The particles are pieces of the variant's own wood: its pellet has the simulated
+        # solid fraction times Table 2's BD_w (the presets' 680 kg/m^3 is oak's).
+        bd = dens.get(v.sigma_z, {}).get("bulk_density_" + compaction_state, float("nan")) * v.bd_wood / p.density
+        bd_se = dens_se.get(v.sigma_z, float("nan")) * v.bd_wood / p.density
+        bd_sd = math.hypot(max(v.bd_pellet_sd, 0.01 * v.bd_pellet), bd_se if math.isfinite(bd_se) else 0.0)
         # The paper's CN (Table 5) is compared with the bulk's, away from the free surfaces.
         cn = dens.get(v.sigma_z, {}).get("coordination_number_relaxed_bulk", float("nan"))
         sc = f.scores[0] if f.scores else {}
@@ -231,9 +245,8 @@ def calibrate_variants(variants=None, preset="tiny", *,
             "dLf_D_sim": outs.get("dLf_D", float("nan")), "dLf_D_exp": v.dLf_D, "dLf_D_sd": v.dLf_D_sd,
             "z_dLf_D": sc.get("z_dLf_D", float("nan")), "rms_z": f.rms_z,
             "peaked": bool(outs.get("peaked", 0.0)),
-            "bd_sim": bd, "bd_exp": v.bd_pellet, "bd_sd": v.bd_pellet_sd,
-            "z_bd": (float((bd - v.bd_pellet) / max(v.bd_pellet_sd, 0.01 * v.bd_pellet))
-                     if math.isfinite(bd) else float("nan")),
+            "bd_sim": bd, "bd_se": bd_se, "bd_exp": v.bd_pellet, "bd_sd": v.bd_pellet_sd,
+            "z_bd": float((bd - v.bd_pellet) / bd_sd) if math.isfinite(bd) else float("nan"),
             "cn_sim": cn, "cn_paper": v.cn, "rrmse_paper": v.rrmse,
             "n_points": f.n_points, "converged": f.converged,
         })
