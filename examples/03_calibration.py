@@ -10,8 +10,9 @@ knobs as defaults. One shared loading stiffness k1 against Table 2's pellet dens
 E_b and sigma_c per variant against Table 3's sigma_f and dL_f/D
 (pelletdem.calibrate.calibrate_variants). Writes into OUT_DIR: calibration.csv (the fitted
 values beside Table 5 and the errors against Tables 2 and 3), calibration.json (the contact
-law, the bond fits, runs and wall time), fig15_measured_vs_simulated.png and fig15_curves.png
-(each variant's fitted sigma_1(dL/D) with Table 3's point). Runs are cached in OUT_DIR/cache:
+law, the bond fits, runs, wall time and the agreement with the paper),
+fig15_measured_vs_simulated.png, fig15_curves.png (each variant's fitted sigma_1(dL/D) with
+Table 3's point) and fig10_relaxed.png (CN against BD_p / BD_w). Runs are cached in OUT_DIR/cache:
 run again to resume; calibration.json's ``sittings`` and ``wall_time_total_s`` then add up the
 wall time of every sitting, killed ones included (up to their last finished run, a lower
 bound). From Python: pelletdem.calibration_dir.calibrate_into(OUT_DIR, preset=..., ...).

@@ -371,6 +371,25 @@ def test_compaction_targets_ask_one_solid_fraction_of_woods_of_different_density
             C.compaction_targets(particle_density=bad)
 
 
+def test_agreement_counts_the_variants_that_meet_each_criterion():
+    import pandas as pd
+
+    from pelletdem.variants import CalibrationReport
+
+    nan = float("nan")
+    table = pd.DataFrame({
+        "z_sigma_f": [0.5, -1.0, 1.01, nan], "z_dLf_D": [0.0, 2.0, -0.2, 0.3],
+        "z_bd": [-2.0, 2.5, 0.0, nan],
+        "E_b_mpa": [100.0, 241.0, 60.0, 50.0], "E_b_mpa_paper": [120.0, 120.0, 120.0, 120.0],  # x2 is 240
+        "sigma_c_mpa": [36.0, 36.0, 18.0, 17.0], "sigma_c_mpa_paper": [36.0, 36.0, 36.0, 36.0],
+        "cn_sim": [12.9, 11.62, 14.18, 14.3], "cn_paper": [12.9, 12.9, 12.9, 12.9],  # 10 % of 12.9 is 1.29
+    })
+    rep = CalibrationReport(table=table, compaction=None, contact={}, fits={}, n_simulations=0, n_cached=0,
+                            n_relaxations=0, wall_time_s=0.0)
+    assert rep.agreement() == {"variants": 4, "sigma_f_within_1sd": 2, "dLf_D_within_1sd": 3,
+                               "density_within_2sd": 2, "bonds_within_factor": 2, "cn_within_tolerance": 3}
+
+
 # --- fits ----------------------------------------------------------------------------------
 
 def test_fit_recovers_two_parameters_of_power_law_model():

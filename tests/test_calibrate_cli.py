@@ -21,6 +21,7 @@ from pelletdem import calibration_dir, cli
 from test_calibrate import CALLS, power_law_runner
 
 FILES = ["calibration.csv", "calibration.json", "fig15_measured_vs_simulated.png", "fig15_curves.png",
+         "fig10_relaxed.png",
          "segments.jsonl"]
 
 
@@ -217,7 +218,8 @@ def test_calibrate_into_averages_packings_and_gives_each_wood_its_density(tmp_pa
     rep = calibration_dir.calibrate_into(tmp_path / "cal", VARIANTS, "tiny", max_runs=2, compaction_runs=0,
                                          packings=2, executor="serial", runner=runner, log=lambda s: None)
     assert guards == {PAPER_OVERLAP_GUARD}
-    assert json.loads((tmp_path / "cal" / "calibration.json").read_text())["packings"] == 2
+    saved = json.loads((tmp_path / "cal" / "calibration.json").read_text())
+    assert saved["packings"] == 2 and saved["agreement"] == rep.agreement()
     for (m, mc, sz), row in zip(VARIANTS, rep.table.itertuples()):
         v, solid = variant(m, mc, sz), 800.0 * (sz / 120) ** 0.25 + 5.0  # k1 is tiny's 1e5
         assert row.bd_sim == pytest.approx(solid * v.bd_wood / 680.0)

@@ -2,9 +2,11 @@
 
 What ``pelletdem calibrate OUT_DIR`` and ``examples/03_calibration.py OUT_DIR`` run. OUT_DIR gets
 calibration.csv (the fitted values beside Table 5 and the errors against Tables 2 and 3),
-calibration.json (the contact law, the bond fits, the ``--set`` values, runs and wall time),
-fig15_measured_vs_simulated.png and fig15_curves.png (each variant's fitted sigma_1(dL/D) with
-Table 3's point). OUT_DIR/cache holds one record per run and OUT_DIR/relaxed the relaxed
+calibration.json (the contact law, the bond fits, the ``--set`` values, runs, wall time and
+how many variants agree with the paper, ``CalibrationReport.agreement``),
+fig15_measured_vs_simulated.png, fig15_curves.png (each variant's fitted sigma_1(dL/D) with
+Table 3's point) and fig10_relaxed.png (the relaxed pellets on the paper's Fig. 10).
+OUT_DIR/cache holds one record per run and OUT_DIR/relaxed the relaxed
 pellets the bond runs branch off, so the same calibration run again reads its runs back
 instead of simulating them. OUT_DIR/segments.jsonl marks the start and end of every sitting
 (:class:`Sittings`): calibration.json's ``sittings`` and ``wall_time_total_s`` add up the wall
@@ -147,7 +149,7 @@ def calibrate_into(out: Union[str, os.PathLike], variants=None, preset="tiny", *
         "contact": report.contact,
         "bond_start": report.bond_start(), "from": os.fspath(source) if source is not None else None,
         "n_simulations": report.n_simulations, "n_cached": report.n_cached,
-        "n_relaxations": report.n_relaxations, "wall_time_s": report.wall_time_s,
+        "n_relaxations": report.n_relaxations, "wall_time_s": report.wall_time_s, "agreement": report.agreement(),
         **sittings.finish(report)}, indent=1))
 
     cache = RunCache(out / "cache")

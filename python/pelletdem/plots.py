@@ -201,6 +201,32 @@ def calibration_measured_vs_simulated(report, ax=None):
     return fig
 
 
+def calibration_coordination(report, ax=None):
+    """The paper's Fig. 10 for a calibration's relaxed pellets: bulk coordination number against
+    BD_p / BD_w (-), the paper's (Table 2's measured BD_p with its SD bar, Table 5's CN) beside
+    the simulated (the relaxed pellet's bulk CN and density, BD_w of Table 2). `report` is a
+    calibrate.CalibrationReport or its `table` (columns bd_exp, bd_sd, bd_sim, bd_wood, cn_paper,
+    cn_sim, material, mc_percent, sigma_z_mpa)."""
+    plt = _plt()
+    table = getattr(report, "table", report)
+    fig, ax = (plt.subplots(figsize=(5.4, 4.2)) if ax is None else (ax.figure, ax))
+    bdw = np.asarray(table["bd_wood"], float)
+    ax.errorbar(np.asarray(table["bd_exp"], float) / bdw, np.asarray(table["cn_paper"], float),
+                xerr=np.asarray(table["bd_sd"], float) / bdw, fmt="o", ms=4, color="k",
+                label="paper: measured $BD_p$, Table 5 CN")
+    ax.plot(np.asarray(table["bd_sim"], float) / bdw, np.asarray(table["cn_sim"], float), "^", ms=5,
+            mfc="none", color="tab:blue", label="simulated, relaxed (bulk CN)")
+    for k, row in enumerate(table.itertuples()):
+        # alternate above and below: variants of one CN in Table 5 sit on top of each other
+        ax.annotate(f"{row.material} {row.mc_percent}% {row.sigma_z_mpa}", (row.bd_exp / row.bd_wood, row.cn_paper),
+                    fontsize=5, xytext=(3, 4 if k % 2 == 0 else -8), textcoords="offset points")
+    ax.set_xlabel("$BD_p / BD_w$")
+    ax.set_ylabel("coordination number CN")
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    return fig
+
+
 def calibration_parameter_map(points, x: str = "E_b", y: str = "sigma_c", value: str = "loss",
                               ax=None, log: bool = True, best: bool = True):
     """Fig. 14-style map of a fit error over two parameters: `points` is a scan's `points`
@@ -275,11 +301,13 @@ def calibration_curves(report, variants, records, ax=None):
 def save_calibration(report, variants, records, directory: str) -> list:
     """Write a calibration's figures as PNG files into `directory` (Fig. 15 as measured against
     simulated, :func:`calibration_measured_vs_simulated`, and as curves,
-    :func:`calibration_curves`); returns the paths."""
+    :func:`calibration_curves`; Fig. 10 for its relaxed pellets, :func:`calibration_coordination`);
+    returns the paths."""
     plt = _plt()
     out = []
     for name, fig in (("fig15_measured_vs_simulated.png", calibration_measured_vs_simulated(report)),
-                      ("fig15_curves.png", calibration_curves(report, variants, records))):
+                      ("fig15_curves.png", calibration_curves(report, variants, records)),
+                      ("fig10_relaxed.png", calibration_coordination(report))):
         path = os.path.join(directory, name)
         fig.savefig(path, dpi=120)
         plt.close(fig)

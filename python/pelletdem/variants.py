@@ -31,9 +31,13 @@ from .runs import RunSpec, as_preset, make_spec, parse_bounds, run_setup
 from .search import FitResult, fit
 from .worker import relaxed_path, run_point
 
-__all__ = ["CalibrationReport", "calibrate_variants"]
+__all__ = ["BOND_FACTOR", "CN_TOLERANCE", "CalibrationReport", "calibrate_variants"]
 
 _MPA = 1e6
+#: Fitted bonds agree with Table 5's when both lie within this factor of them.
+BOND_FACTOR = 2.0
+#: A relaxed pellet's bulk CN agrees with Table 5's within this fraction of it.
+CN_TOLERANCE = 0.10
 
 
 @dataclass
@@ -62,6 +66,27 @@ class CalibrationReport:
     n_relaxations: int
     wall_time_s: float
 
+    def agreement(self) -> Dict[str, int]:
+        """How many variants meet each of the paper-agreement criteria (counts; ``variants``
+        the total): sigma_f and dL_f/D within 1 SD of Table 3, the density within 2 SD (the
+        table's z_bd), E_b and sigma_c both within a factor :data:`BOND_FACTOR` of Table 5,
+        the bulk CN within :data:`CN_TOLERANCE` of Table 5's."""
+        t = self.table
+
+        def count(mask) -> int:
+            return int(np.sum(np.asarray(mask, bool)))
+
+        ratio_e, ratio_s = t["E_b_mpa"] / t["E_b_mpa_paper"], t["sigma_c_mpa"] / t["sigma_c_mpa_paper"]
+        return {
+            "variants": len(t),
+            "sigma_f_within_1sd": count(np.abs(t["z_sigma_f"]) <= 1.0),
+            "dLf_D_within_1sd": count(np.abs(t["z_dLf_D"]) <= 1.0),
+            "density_within_2sd": count(np.abs(t["z_bd"]) <= 2.0),
+            "bonds_within_factor": count((np.abs(np.log(ratio_e)) <= math.log(BOND_FACTOR))
+                                         & (np.abs(np.log(ratio_s)) <= math.log(BOND_FACTOR))),
+            "cn_within_tolerance": count(np.abs(t["cn_sim"] / t["cn_paper"] - 1.0) <= CN_TOLERANCE),
+        }
+
     def bond_start(self) -> Dict[str, Dict[str, float]]:
         """The fitted bond parameters per variant, {label: {name: value}} (SI units), to start
         another calibration from (``calibrate_variants(start=...)``)."""
@@ -77,7 +102,12 @@ class CalibrationReport:
                 c = self.compaction
                 head += (f"compaction fit: {', '.join(f'{k}={v:.4g}' for k, v in c.params.items())}, "
                          f"rms z {c.rms_z:.3g} ({c.message})\n")
-            return head + self.table.to_string(float_format=lambda v: f"{v:.4g}")
+            a = self.agreement()
+            tail = (f"\nagreement with the paper, of {a['variants']} variants: sigma_f within 1 SD "
+                    f"{a['sigma_f_within_1sd']}, dL_f/D within 1 SD {a['dLf_D_within_1sd']}, density within "
+                    f"2 SD {a['density_within_2sd']}, E_b and sigma_c within x{BOND_FACTOR:g} of Table 5 "
+                    f"{a['bonds_within_factor']}, bulk CN within {CN_TOLERANCE:.0%} {a['cn_within_tolerance']}")
+            return head + self.table.to_string(float_format=lambda v: f"{v:.4g}") + tail
 
 
 def calibrate_variants(variants=None, preset="tiny", *,
@@ -245,7 +275,7 @@ def calibrate_variants(variants=None, preset="tiny", *,
             "dLf_D_sim": outs.get("dLf_D", float("nan")), "dLf_D_exp": v.dLf_D, "dLf_D_sd": v.dLf_D_sd,
             "z_dLf_D": sc.get("z_dLf_D", float("nan")), "rms_z": f.rms_z,
             "peaked": bool(outs.get("peaked", 0.0)),
-            "bd_sim": bd, "bd_se": bd_se, "bd_exp": v.bd_pellet, "bd_sd": v.bd_pellet_sd,
+            "bd_sim": bd, "bd_se": bd_se, "bd_exp": v.bd_pellet, "bd_sd": v.bd_pellet_sd, "bd_wood": v.bd_wood,
             "z_bd": float((bd - v.bd_pellet) / bd_sd) if math.isfinite(bd) else float("nan"),
             "cn_sim": cn, "cn_paper": v.cn, "rrmse_paper": v.rrmse,
             "n_points": f.n_points, "converged": f.converged,
