@@ -72,6 +72,7 @@ def _main(argv):
     (["--dask", " "], "--dask", "tcp://"),
     (["--preset", "huge"], "--preset", "tiny"),
     (["--max-runs", "2.5"], "--max-runs", "int"),
+    (["--set", "contact.moisture_content=20"], "contact.moisture_content", "each condition's moisture"),
     (["--packings", "0"], "--packings", "1..64"),
     (["--packings", "65"], "--packings", "1..64"),
     (["--data", "example", "--packings", "1"], "--packings", "2..64"),
@@ -228,6 +229,29 @@ def test_calibrate_into_averages_packings_and_gives_each_wood_its_density(tmp_pa
         assert row.z_bd == pytest.approx((row.bd_sim - v.bd_pellet) / sd)
     with pytest.raises(ValueError, match="packings"):
         calibration_dir.calibrate_into(tmp_path / "bad", VARIANTS, "tiny", packings=0, runner=runner)
+
+
+def test_each_variant_runs_at_its_own_moisture_content(tmp_path):
+    """The variant's MC is its contact law's: the diametral runs carry it, and a moisture
+    effect that acts in compaction gives wet and dry pellets of their own."""
+    seen = []
+
+    def runner(spec):
+        seen.append((spec.kind, spec.sigma_z, spec.preset.contact.moisture_content, spec.relax_key))
+        return power_law_runner(spec)
+
+    two = [("oak", 8, 120), ("oak", 20, 120)]
+    calibration_dir.calibrate_into(tmp_path / "dry", two, "tiny", max_runs=1, compaction_runs=0, executor="serial",
+                                   runner=runner, log=lambda s: None)
+    assert {mc for kind, _, mc, _ in seen if kind == "diametral"} == {8.0, 20.0}
+    assert len({rk for *_, rk in seen}) == 1  # no moisture effect: one relaxed pellet
+    seen.clear()
+    calibration_dir.calibrate_into(tmp_path / "wet", two, "tiny", max_runs=1, compaction_runs=0, executor="serial",
+                                   settings={"contact.moisture_yield": 0.03}, runner=runner, log=lambda s: None)
+    assert len({rk for kind, *_, rk in seen if kind == "compaction"}) == 2
+    with pytest.raises(ValueError, match="moisture_content"):
+        calibration_dir.calibrate_into(tmp_path / "bad", two, "tiny", settings={"contact.moisture_content": 20.0},
+                                       runner=runner, log=lambda s: None)
 
 
 def test_calibrate_into_from_an_earlier_calibration(tmp_path):

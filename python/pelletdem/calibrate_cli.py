@@ -118,6 +118,7 @@ def check(args) -> dict:
     from .calibration_dir import load_calibration
     from .law_settings import apply_settings, parse_settings
     from .laws import BondLaw
+    from .loop_simulators import refuse_condition_rows
     from .presets import get_preset
     from .runs import make_spec
 
@@ -138,6 +139,7 @@ def check(args) -> dict:
             raise ValueError(f"--packings = {args.packings} is out of range: allowed 2..64 with --data")
     elif args.packings is not None and not 1 <= args.packings <= 64:
         raise ValueError(f"--packings = {args.packings} is out of range: allowed 1..64")
+    refuse_condition_rows(settings, "--set")
     for name in settings:
         if name in FITTED:
             raise ValueError(f"--set {name}: the calibration fits {FITTED[name]} per variant; "

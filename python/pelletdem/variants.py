@@ -150,6 +150,10 @@ def calibrate_variants(variants=None, preset="tiny", *,
        each pellet once, in parallel; the fits branch off those pellets (a worker that does
        not hold one loads it from ``relaxed_dir`` when given, else relaxes it itself).
 
+    Each variant's moisture content (%) is its contact law's ``moisture_content``, which the
+    moisture effects (``contact.moisture_yield``, ``bond.moisture_coefficient``) read; the
+    shared compaction fit runs at the law's own.
+
     ``contact``: ContactLaw field overrides used as they are, in place of step 1 (so not with
     a ``compaction`` mapping): e.g. ``report.contact`` of a calibration on a smaller preset of the
     same radii, whose pellets' densities under a pressure should be close to the larger ones'
@@ -182,6 +186,8 @@ def calibrate_variants(variants=None, preset="tiny", *,
             raise ValueError(f"contact = {contact!r}: pass a mapping of ContactLaw fields, "
                              "e.g. {'k1': 4e4, 'k2': 1.6e5}")
         make_spec({}, preset=p, diametral=False, contact=contact)  # names and values checked
+    if "moisture_content" in (contact or {}) or p.contact.moisture_content != type(p.contact)().moisture_content:
+        raise ValueError("contact.moisture_content is set by each variant's moisture content: do not set it")
     if not isinstance(start, (str, Mapping)) or (isinstance(start, str) and start != "table5"):
         raise ValueError(f"start = {start!r}: pass 'table5' or a mapping {{label: {{name: value}}}}")
     vlog = (lambda *a: print(*a, flush=True)) if verbose else (lambda *a: None)
@@ -205,18 +211,30 @@ def calibrate_variants(variants=None, preset="tiny", *,
         # relaxed_dir, any worker loads them) instead of several workers relaxing the same
         # pellet at the same time. A cached run whose relaxed pellet is missing from
         # relaxed_dir (deleted, or a killed sitting) is run again to put it back.
-        sizes = sorted({v.sigma_z for v in vs})
+        # Each variant's moisture content is its contact law's, which the moisture effects
+        # read; where none acts, wet and dry share one relaxed pellet (one run key).
+        sizes = sorted({(v.sigma_z, v.mc_percent) for v in vs})
         keep = relaxed_dir is not None and runner is run_point
 
         def missing(spec):
             return keep and not os.path.exists(relaxed_path(relaxed_dir, spec.relax_key))
 
-        pre = {sz: [make_spec({}, preset=p, sigma_z=sz, seed=s, diametral=False, contact=contact)
-                    for s in run_setup(p, None, None, seeds, None).seeds] for sz in sizes}
-        pending = {sz: [ev.submit(sp, rerun=missing(sp)) for sp in specs] for sz, specs in pre.items()}
+        def contact_at(mc):
+            return {**contact, "moisture_content": float(mc)}
+
+        submitted = {}
+
+        def submit_once(spec):
+            if spec.key not in submitted:
+                submitted[spec.key] = ev.submit(spec, rerun=missing(spec))
+            return submitted[spec.key]
+
+        pending = {(sz, mc): [submit_once(make_spec({}, preset=p, sigma_z=sz, seed=s, diametral=False,
+                                                    contact=contact_at(mc)))
+                              for s in run_setup(p, None, None, seeds, None).seeds] for sz, mc in sizes}
 
         def one(v):
-            for f in pending[v.sigma_z]:
+            for f in pending[(v.sigma_z, v.mc_percent)]:
                 f.result()
             st = {}
             if start == "table5":
@@ -236,14 +254,15 @@ def calibrate_variants(variants=None, preset="tiny", *,
             if break_drop and not p.break_drop:
                 pv = p.with_(break_drop=break_drop, break_from_dLD=round(0.5 * max(v.dLf_D - 2 * v.dLf_D_sd, 0.0), 4))
             vlog(f"[calibrate] {v.label}: start {sp}, max_dLD {mdl}, break at {pv.break_drop} of the peak")
-            return fit(bond_params, tg, start=sp or None, preset=pv, seeds=seeds, bond=bond, contact=contact,
+            return fit(bond_params, tg, start=sp or None, preset=pv, seeds=seeds, bond=bond,
+                       contact=contact_at(v.mc_percent),
                        max_dLD=mdl, tol=tol, max_runs=max_runs, evaluator=ev, verbose=verbose)
 
         with cf.ThreadPoolExecutor(max_workers=len(vs), thread_name_prefix="calibrate") as drivers:
             fits = dict(zip([v.label for v in vs], drivers.map(one, vs)))
         dens, dens_se = {}, {}
         for sz in sizes:
-            records = [f.result() for f in pending[sz]]
+            records = [f.result() for f in pending[sz]]  # sz: (sigma_z, mc)
             outs, _, good, _ = mean_outputs(records)
             dens[sz] = outs if good else {}
             key = "bulk_density_" + compaction_state
@@ -260,11 +279,12 @@ def calibrate_variants(variants=None, preset="tiny", *,
         outs = f.outputs[0] if f.outputs else {}
         # The particles are pieces of the variant's own wood: its pellet has the simulated
         # solid fraction times Table 2's BD_w (the presets' 680 kg/m^3 is oak's).
-        bd = dens.get(v.sigma_z, {}).get("bulk_density_" + compaction_state, float("nan")) * v.bd_wood / p.density
-        bd_se = dens_se.get(v.sigma_z, float("nan")) * v.bd_wood / p.density
+        at = (v.sigma_z, v.mc_percent)
+        bd = dens.get(at, {}).get("bulk_density_" + compaction_state, float("nan")) * v.bd_wood / p.density
+        bd_se = dens_se.get(at, float("nan")) * v.bd_wood / p.density
         bd_sd = math.hypot(max(v.bd_pellet_sd, 0.01 * v.bd_pellet), bd_se if math.isfinite(bd_se) else 0.0)
         # The paper's CN (Table 5) is compared with the bulk's, away from the free surfaces.
-        cn = dens.get(v.sigma_z, {}).get("coordination_number_relaxed_bulk", float("nan"))
+        cn = dens.get(at, {}).get("coordination_number_relaxed_bulk", float("nan"))
         sc = f.scores[0] if f.scores else {}
         rows.append({
             "material": v.material, "mc_percent": v.mc_percent, "sigma_z_mpa": v.sigma_z_mpa,
