@@ -214,8 +214,17 @@ def calibration_coordination(report, ax=None):
     ax.errorbar(np.asarray(table["bd_exp"], float) / bdw, np.asarray(table["cn_paper"], float),
                 xerr=np.asarray(table["bd_sd"], float) / bdw, fmt="o", ms=4, color="k",
                 label="paper: measured $BD_p$, Table 5 CN")
-    ax.plot(np.asarray(table["bd_sim"], float) / bdw, np.asarray(table["cn_sim"], float), "^", ms=5,
-            mfc="none", color="tab:blue", label="simulated, relaxed (bulk CN)")
+    xs, ys = np.asarray(table["bd_sim"], float) / bdw, np.asarray(table["cn_sim"], float)
+    ax.plot(xs, ys, "^", ms=5, mfc="none", color="tab:blue", label="simulated, relaxed (bulk CN)")
+    # variants that share a relaxed pellet (one pressure, no moisture effect) share a point
+    shared = {}
+    for x, y, row in zip(xs, ys, table.itertuples()):
+        if np.isfinite(x) and np.isfinite(y):
+            shared.setdefault((round(float(x), 3), round(float(y), 2)), []).append(row)
+    for (x, y), rows in shared.items():
+        text = f"{rows[0].sigma_z_mpa} MPa" + (f" ({len(rows)} variants)" if len(rows) > 1 else
+                                              f", {rows[0].material} {rows[0].mc_percent}%")
+        ax.annotate(text, (x, y), fontsize=6, color="tab:blue", xytext=(4, -9), textcoords="offset points")
     for k, row in enumerate(table.itertuples()):
         # alternate above and below: variants of one CN in Table 5 sit on top of each other
         ax.annotate(f"{row.material} {row.mc_percent}% {row.sigma_z_mpa}", (row.bd_exp / row.bd_wood, row.cn_paper),
