@@ -10,9 +10,9 @@ One shared loading stiffness k1 against Table 2's pellet densities, then E_b and
 variant against Table 3's sigma_f and dL_f/D. Writes calibration.csv, calibration.json, the
 Fig. 15 plots and Fig. 10 for the relaxed pellets into OUT_DIR (pelletdem.calibration_dir).
 Every run is cached in OUT_DIR/cache: the same command again resumes where a stopped one
-ended and runs nothing twice. --from DIR
-starts from an earlier calibration (its k1 and bond fits, on a smaller preset) in place of
-the compaction fit and Table 5's values. Every argument is checked before any simulation.
+ended and runs nothing twice. --from DIR starts from an earlier calibration (its k1 and bond
+fits, on a smaller preset) in place of the compaction fit and Table 5's values. Every
+argument is checked before any simulation.
 
 With --data FILE (a loop data manifest, docs/loop.md; 'example' for the shipped one) the
 manifest's [fit] parameters are fitted to its conditions that are not held out, as the

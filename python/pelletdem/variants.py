@@ -186,6 +186,7 @@ def calibrate_variants(variants=None, preset="tiny", *,
             raise ValueError(f"contact = {contact!r}: pass a mapping of ContactLaw fields, "
                              "e.g. {'k1': 4e4, 'k2': 1.6e5}")
         make_spec({}, preset=p, diametral=False, contact=contact)  # names and values checked
+    # each variant's own MC replaces the law's: one set elsewhere would be silently dropped
     if "moisture_content" in (contact or {}) or p.contact.moisture_content != type(p.contact)().moisture_content:
         raise ValueError("contact.moisture_content is set by each variant's moisture content: do not set it")
     if not isinstance(start, (str, Mapping)) or (isinstance(start, str) and start != "table5"):
