@@ -142,22 +142,19 @@ def _fig_coordination(res: LoopResult, variants: Dict, path: str) -> str:
     """The paper's Fig. 10 for the relaxed pellets: bulk CN against BD_p / BD_w (BD_w the
     intact wood's bulk density, Table 2), the paper's (its measured BD_p with SD, its fitted
     CN of Table 5) beside the baseline's and the final model's on fresh packings."""
+    from .plots import paper_coordination
+
     plt = _plt()
     fig, ax = plt.subplots(figsize=(5.4, 4.2))
     conds = list(variants)
     bdw = np.array([variants[c].bd_wood for c in conds])
-    ax.errorbar([variants[c].bd_pellet for c in conds] / bdw, [variants[c].cn for c in conds],
-                xerr=[variants[c].bd_pellet_sd for c in conds] / bdw, fmt="o", ms=4, color="k",
-                label="paper: measured BD_p, Table 5 CN")
+    paper_coordination(ax, [variants[c].bd_pellet for c in conds], [variants[c].bd_pellet_sd for c in conds], bdw,
+                       [variants[c].cn for c in conds], [c.label for c in conds])
     models = [(res.baseline, "s", "tab:red")] + ([(res.final, "^", "tab:blue")] if res.chosen else [])
     for mf, marker, colour in models:
         x = np.array([mf.check[c].scalar("bulk_density") for c in conds]) / bdw
         y = [mf.check[c].scalar("coordination_number") for c in conds]
         ax.plot(x, y, marker, ms=5, mfc="none", color=colour, label=f"{mf.name}, relaxed (bulk CN)")
-    for k, (c, xv, yv) in enumerate(zip(conds, [variants[c].bd_pellet for c in conds] / bdw,
-                                        [variants[c].cn for c in conds])):
-        # alternate above and below: variants of one CN in Table 5 sit on top of each other
-        ax.annotate(c.label, (xv, yv), fontsize=5, xytext=(3, 4 if k % 2 == 0 else -8), textcoords="offset points")
     ax.set_xlabel("$BD_p / BD_w$")
     ax.set_ylabel("coordination number CN")
     ax.legend(fontsize=7)

@@ -201,6 +201,18 @@ def calibration_measured_vs_simulated(report, ax=None):
     return fig
 
 
+def paper_coordination(ax, bd_p, bd_p_sd, bd_w, cn, labels) -> None:
+    """The paper's points of Fig. 10 on ``ax``: Table 2's measured BD_p (kg/m^3, SD bar) over
+    its intact wood's BD_w against Table 5's coordination number, each point labelled."""
+    bd_w = np.asarray(bd_w, float)
+    x, y = np.asarray(bd_p, float) / bd_w, np.asarray(cn, float)
+    ax.errorbar(x, y, xerr=np.asarray(bd_p_sd, float) / bd_w, fmt="o", ms=4, color="k",
+                label="paper: measured $BD_p$, Table 5 CN")
+    for k, (text, xv, yv) in enumerate(zip(labels, x, y)):
+        # alternate above and below: variants of one CN in Table 5 sit on top of each other
+        ax.annotate(text, (xv, yv), fontsize=5, xytext=(3, 4 if k % 2 == 0 else -8), textcoords="offset points")
+
+
 def calibration_coordination(report, ax=None):
     """The paper's Fig. 10 for a calibration's relaxed pellets: bulk coordination number against
     BD_p / BD_w (-), the paper's (Table 2's measured BD_p with its SD bar, Table 5's CN) beside
@@ -211,9 +223,8 @@ def calibration_coordination(report, ax=None):
     table = getattr(report, "table", report)
     fig, ax = (plt.subplots(figsize=(5.4, 4.2)) if ax is None else (ax.figure, ax))
     bdw = np.asarray(table["bd_wood"], float)
-    ax.errorbar(np.asarray(table["bd_exp"], float) / bdw, np.asarray(table["cn_paper"], float),
-                xerr=np.asarray(table["bd_sd"], float) / bdw, fmt="o", ms=4, color="k",
-                label="paper: measured $BD_p$, Table 5 CN")
+    paper_coordination(ax, table["bd_exp"], table["bd_sd"], bdw, table["cn_paper"],
+                       [f"{r.material} {r.mc_percent}% {r.sigma_z_mpa}" for r in table.itertuples()])
     xs, ys = np.asarray(table["bd_sim"], float) / bdw, np.asarray(table["cn_sim"], float)
     ax.plot(xs, ys, "^", ms=5, mfc="none", color="tab:blue", label="simulated, relaxed (bulk CN)")
     # variants that share a relaxed pellet (one pressure, no moisture effect) share a point
@@ -225,10 +236,6 @@ def calibration_coordination(report, ax=None):
         text = f"{rows[0].sigma_z_mpa} MPa" + (f" ({len(rows)} variants)" if len(rows) > 1 else
                                               f", {rows[0].material} {rows[0].mc_percent}%")
         ax.annotate(text, (x, y), fontsize=6, color="tab:blue", xytext=(4, -9), textcoords="offset points")
-    for k, row in enumerate(table.itertuples()):
-        # alternate above and below: variants of one CN in Table 5 sit on top of each other
-        ax.annotate(f"{row.material} {row.mc_percent}% {row.sigma_z_mpa}", (row.bd_exp / row.bd_wood, row.cn_paper),
-                    fontsize=5, xytext=(3, 4 if k % 2 == 0 else -8), textcoords="offset points")
     ax.set_xlabel("$BD_p / BD_w$")
     ax.set_ylabel("coordination number CN")
     ax.legend(fontsize=7)

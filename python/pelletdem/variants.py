@@ -214,7 +214,7 @@ def calibrate_variants(variants=None, preset="tiny", *,
         # relaxed_dir (deleted, or a killed sitting) is run again to put it back.
         # Each variant's moisture content is its contact law's, which the moisture effects
         # read; where none acts, wet and dry share one relaxed pellet (one run key).
-        sizes = sorted({(v.sigma_z, v.mc_percent) for v in vs})
+        groups = sorted({(v.sigma_z, v.mc_percent) for v in vs})
         keep = relaxed_dir is not None and runner is run_point
 
         def missing(spec):
@@ -232,7 +232,7 @@ def calibrate_variants(variants=None, preset="tiny", *,
 
         pending = {(sz, mc): [submit_once(make_spec({}, preset=p, sigma_z=sz, seed=s, diametral=False,
                                                     contact=contact_at(mc)))
-                              for s in run_setup(p, None, None, seeds, None).seeds] for sz, mc in sizes}
+                              for s in run_setup(p, None, None, seeds, None).seeds] for sz, mc in groups}
 
         def one(v):
             for f in pending[(v.sigma_z, v.mc_percent)]:
@@ -262,14 +262,14 @@ def calibrate_variants(variants=None, preset="tiny", *,
         with cf.ThreadPoolExecutor(max_workers=len(vs), thread_name_prefix="calibrate") as drivers:
             fits = dict(zip([v.label for v in vs], drivers.map(one, vs)))
         dens, dens_se = {}, {}
-        for sz in sizes:
-            records = [f.result() for f in pending[sz]]  # sz: (sigma_z, mc)
+        for at in groups:
+            records = [f.result() for f in pending[at]]
             outs, _, good, _ = mean_outputs(records)
-            dens[sz] = outs if good else {}
+            dens[at] = outs if good else {}
             key = "bulk_density_" + compaction_state
             per_seed = [r["outputs"][key] for r in records if r["ok"] and key in r["outputs"]]
             # the model's own standard error over its packings (none with one packing)
-            dens_se[sz] = (float(np.std(per_seed, ddof=1) / math.sqrt(len(per_seed)))
+            dens_se[at] = (float(np.std(per_seed, ddof=1) / math.sqrt(len(per_seed)))
                            if good and len(per_seed) > 1 else float("nan"))
 
         stats = ev.stats()
