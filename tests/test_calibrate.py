@@ -371,6 +371,32 @@ def test_compaction_targets_ask_one_solid_fraction_of_woods_of_different_density
             C.compaction_targets(particle_density=bad)
 
 
+def test_compaction_targets_by_moisture_content():
+    """With a moisture effect, wet and dry ask their own densities: the mean of each (pressure,
+    MC) group, the between-wood spread in the SD, the MC on the target for its runs."""
+    from pelletdem.measured import variants
+
+    tg = C.compaction_targets(by_mc=True)
+    assert [(t.sigma_z, t.mc_percent) for t in tg] == [(60e6, 8.0), (60e6, 20.0), (120e6, 8.0), (120e6, 20.0)]
+    wet120 = [v.bd_pellet for v in variants() if v.key[1:] == (20, 120)]
+    assert tg[3].bulk_density == pytest.approx(np.mean(wet120))
+    assert tg[3].bulk_density_sd > np.std(wet120, ddof=1)
+    assert all(t.mc_percent is None for t in C.compaction_targets())
+    for bad in (-1.0, 101.0, "8"):
+        with pytest.raises(ValueError, match="mc_percent"):
+            C.Targets(sigma_z=60e6, bulk_density=800.0, mc_percent=bad)
+
+
+def test_a_targets_moisture_content_reaches_its_runs():
+    from pelletdem.runs import run_setup
+
+    setup = run_setup("tiny", None, {"moisture_yield": 0.03}, (0,), None)
+    wet = setup.spec({}, 60e6, 0, False, 20.0)
+    assert wet.preset.contact.moisture_content == 20.0
+    assert setup.spec({}, 60e6, 0, False).preset.contact.moisture_content == 8.0
+    assert wet.relax_key != setup.spec({}, 60e6, 0, False).relax_key
+
+
 def test_agreement_counts_the_variants_that_meet_each_criterion():
     import pandas as pd
 

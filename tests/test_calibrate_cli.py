@@ -249,6 +249,10 @@ def test_each_variant_runs_at_its_own_moisture_content(tmp_path):
     calibration_dir.calibrate_into(tmp_path / "wet", two, "tiny", max_runs=1, compaction_runs=0, executor="serial",
                                    settings={"contact.moisture_yield": 0.03}, runner=runner, log=lambda s: None)
     assert len({rk for kind, *_, rk in seen if kind == "compaction"}) == 2
+    seen.clear()  # the shared k1 fit asks wet and dry pellets their own densities
+    calibration_dir.calibrate_into(tmp_path / "fit", two, "tiny", max_runs=1, compaction_runs=2, executor="serial",
+                                   settings={"contact.moisture_yield": 0.03}, runner=runner, log=lambda s: None)
+    assert {mc for kind, _, mc, _ in seen if kind == "compaction"} == {8.0, 20.0}
     with pytest.raises(ValueError, match="moisture_content"):
         calibration_dir.calibrate_into(tmp_path / "bad", two, "tiny", settings={"contact.moisture_content": 20.0},
                                        runner=runner, log=lambda s: None)

@@ -41,6 +41,8 @@ class Targets:
     diametral ``measured.Curve`` or an ``(x, y)`` pair (dL/D, sigma_1 in Pa) for eq. 16;
     ``bulk_density`` / ``bulk_density_sd``: kg/m^3 of the pellet ``density_state`` 'relaxed'
     (Table 2's pellets) or 'max' (at the end of compaction). Leave out what is not measured.
+    ``mc_percent``: the moisture content (%) the pellet is made at, the contact law's
+    ``moisture_content`` for its runs (the moisture effects read it); None keeps the law's.
     """
 
     sigma_z: float
@@ -53,9 +55,13 @@ class Targets:
     density_state: str = "relaxed"
     curve: Any = None
     label: str = ""
+    mc_percent: Optional[float] = None
 
     def __post_init__(self):
         check_positive("sigma_z", self.sigma_z, "Pa")
+        if self.mc_percent is not None and not (isinstance(self.mc_percent, (int, float))
+                                                and 0.0 <= self.mc_percent <= 100.0):
+            raise ValueError(f"mc_percent = {self.mc_percent!r} is out of range: allowed 0..100 %")
         for name in ("sigma_f", "dLf_D", "bulk_density"):
             v = getattr(self, name)
             if v is not None:
@@ -158,7 +164,7 @@ def score(outputs: Mapping[str, float], target: Targets, curve: Optional[Mapping
 
 
 def compaction_targets(variants=None, state: str = "relaxed",
-                       particle_density: Optional[float] = None) -> List[Targets]:
+                       particle_density: Optional[float] = None, by_mc: bool = False) -> List[Targets]:
     """One bulk-density target per compaction pressure, shared by all materials (Table 2).
 
     For each pressure of ``variants`` (default the 12): the mean of the variants' pellet bulk
@@ -167,7 +173,9 @@ def compaction_targets(variants=None, state: str = "relaxed",
     ``particle_density`` (kg/m^3, the model particles'): each variant's density (and SD) is
     first taken to that particle density at the same BD_p / BD_w (Table 2's intact wood), so
     that woods of different densities ask one contact law for one solid fraction; None keeps
-    Table 2's densities as they are.
+    Table 2's densities as they are. ``by_mc``: one target per pressure and moisture content
+    (its ``mc_percent`` set), for a contact law whose moisture effect makes wet and dry
+    pellets differ; False pools the moisture contents.
     """
     from .paper_tables import variants as all_variants
 
@@ -175,15 +183,19 @@ def compaction_targets(variants=None, state: str = "relaxed",
     if particle_density is not None:
         check_positive("particle_density", particle_density, "kg/m^3")
     out = []
-    for sz in sorted({v.sigma_z for v in vs}):
-        group = [v for v in vs if v.sigma_z == sz]
+    keys = sorted({(v.sigma_z, v.mc_percent if by_mc else None) for v in vs},
+                  key=lambda k: (k[0], -1.0 if k[1] is None else k[1]))
+    for sz, mc in keys:
+        group = [v for v in vs if v.sigma_z == sz and (mc is None or v.mc_percent == mc)]
         scale = np.array([particle_density / v.bd_wood if particle_density is not None else 1.0 for v in group])
         means = np.array([v.bd_pellet for v in group]) * scale
         sds = np.array([v.bd_pellet_sd for v in group]) * scale
         between = float(np.std(means, ddof=1)) if len(means) > 1 else 0.0
         sd = float(math.sqrt(np.mean(sds**2) + between**2))
+        at = f"{sz / _MPA:g} MPa" + ("" if mc is None else f", MC {mc:g} %")
         out.append(Targets(sigma_z=sz, bulk_density=float(means.mean()), bulk_density_sd=sd,
-                           density_state=state, label=f"BD at {sz / _MPA:g} MPa (mean of {len(group)})"))
+                           density_state=state, label=f"BD at {at} (mean of {len(group)})",
+                           mc_percent=None if mc is None else float(mc)))
     return out
 
 

@@ -328,11 +328,16 @@ class RunSetup:
     seeds: Tuple[int, ...]
     max_dLD: Optional[float]
 
-    def spec(self, params: Mapping[str, float], sigma_z: float, seed: int, diametral: bool) -> RunSpec:
+    def spec(self, params: Mapping[str, float], sigma_z: float, seed: int, diametral: bool,
+             mc_percent: Optional[float] = None) -> RunSpec:
         """The :class:`RunSpec` of ``params`` (SI, see :func:`make_spec`) at ``sigma_z`` (Pa)
-        and ``seed``; a compaction-only run unless ``diametral``."""
+        and ``seed``; a compaction-only run unless ``diametral``. ``mc_percent``: the moisture
+        content (%) it is made at, the contact law's ``moisture_content`` (None: the law's)."""
+        contact = self.contact
+        if mc_percent is not None:
+            contact = {**(contact or {}), "moisture_content": float(mc_percent)}
         return make_spec(params, preset=self.preset, sigma_z=sigma_z, seed=seed, bond=self.bond,
-                         diametral=diametral, contact=self.contact, max_dLD=self.max_dLD)
+                         diametral=diametral, contact=contact, max_dLD=self.max_dLD)
 
 
 def run_setup(preset, bond, contact, seeds, max_dLD) -> RunSetup:

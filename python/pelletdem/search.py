@@ -119,7 +119,8 @@ class _Problem:
 
     def specs(self, params: Mapping[str, float]) -> List[List[RunSpec]]:
         p = {**self.fixed, **params}
-        return [[self.setup.spec(p, t.sigma_z, s, t.diametral) for s in self.setup.seeds] for t in self.targets]
+        return [[self.setup.spec(p, t.sigma_z, s, t.diametral, t.mc_percent) for s in self.setup.seeds]
+                for t in self.targets]
 
     def evaluate(self, params: Mapping[str, float], ev: Evaluator) -> _Point:
         groups = self.specs(params)
@@ -277,7 +278,8 @@ def scan(param_grid: Mapping[str, Sequence[float]], targets=None, *, preset="tin
             dia = t.diametral if t is not None else diametral
             seed_list = [p["seed"]] if "seed" in p else setup.seeds
             for s in seed_list:
-                specs.append(setup.spec({k: v for k, v in p.items() if k != "seed"}, sz, s, dia))
+                specs.append(setup.spec({k: v for k, v in p.items() if k != "seed"}, sz, s, dia,
+                                        t.mc_percent if t is not None else None))
                 index.append((pi, ti, s))
     with open_executor(executor, max_workers) as ex:
         ev = Evaluator(cache, ex, with_relaxed_dir(runner, relaxed_dir), relaxed_shared=relaxed_dir is not None)

@@ -132,7 +132,8 @@ def calibrate_variants(variants=None, preset="tiny", *,
        pressure matches the mean of Table 2's pellet densities over the variants at that
        pressure, each taken to the preset's particle density at its own BD_p / BD_w (SD:
        within- and between-variant spread, :func:`compaction_targets`); k2/k1 stays fixed
-       (e = 0.5). The paper fitted p_y to the compaction curves instead; Table 2 is
+       (e = 0.5). Where a moisture effect acts, wet and dry are their own targets, each run at
+       its moisture content. The paper fitted p_y to the compaction curves instead; Table 2 is
        what ships with the package.
     2. Per variant, with that contact law: fit ``bond_params`` (default E_b in [1e5, 1e10] Pa,
        sigma_c in [1e4, 1e10] Pa, tau_c = sigma_c) against Table 3's sigma_f and dL_f/D with
@@ -200,7 +201,9 @@ def calibrate_variants(variants=None, preset="tiny", *,
         comp_fit = None
         if compaction is not None:
             vlog("[calibrate] compaction fit")
-            comp_fit = fit(compaction, compaction_targets(vs, compaction_state, p.density), preset=p, seeds=seeds,
+            # wet and dry pellets are asked their own densities where a moisture effect acts
+            targets = compaction_targets(vs, compaction_state, p.density, by_mc=p.contact.to_core().moisture_acts())
+            comp_fit = fit(compaction, targets, preset=p, seeds=seeds,
                            tol=tol, max_runs=compaction_max_runs, evaluator=ev, verbose=verbose)
             (name, val), = comp_fit.params.items()
             k1 = val if name == "k1" else k1_from_yield_strength(val, p.radius_mean)
