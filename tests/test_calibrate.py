@@ -6,6 +6,7 @@ density as power laws of the parameters, exponents deliberately off the paper's 
 so the machinery is tested in milliseconds; test_calibrate_engine.py runs the real engine on
 the 'tiny' pellet.
 """
+import dataclasses
 import json
 import math
 import os
@@ -387,11 +388,25 @@ def test_compaction_targets_by_moisture_content():
             C.Targets(sigma_z=60e6, bulk_density=800.0, mc_percent=bad)
 
 
+def test_compaction_targets_by_material_carry_the_woods_density():
+    from pelletdem.measured import variants
+
+    tg = C.compaction_targets(particle_density=680.0, by_mc=True, by_material=True)
+    assert len(tg) == 12
+    pine = [t for t in tg if "pine" in t.label and t.sigma_z == 60e6 and t.mc_percent == 8.0][0]
+    v = [v for v in variants() if v.key == ("pine", 8, 60)][0]
+    assert pine.wood_density == v.bd_wood
+    assert pine.bulk_density == pytest.approx(680.0 * v.bd_pellet / v.bd_wood)
+    assert pine.condition_rows() == {"moisture_content": 8.0, "wood_density": v.bd_wood}
+    with pytest.raises(ValueError, match="wood_density"):
+        C.Targets(sigma_z=60e6, bulk_density=800.0, wood_density=-1.0)
+
+
 def test_a_targets_moisture_content_reaches_its_runs():
     from pelletdem.runs import run_setup
 
     setup = run_setup("tiny", None, {"moisture_yield": 0.03}, (0,), None)
-    wet = setup.spec({}, 60e6, 0, False, 20.0)
+    wet = setup.spec({}, 60e6, 0, False, C.Targets(sigma_z=60e6, bulk_density=1.0, mc_percent=20.0).condition_rows())
     assert wet.preset.contact.moisture_content == 20.0
     assert setup.spec({}, 60e6, 0, False).preset.contact.moisture_content == 8.0
     assert wet.relax_key != setup.spec({}, 60e6, 0, False).relax_key
@@ -588,3 +603,31 @@ def test_other_bad_inputs_name_the_parameter():
     with pytest.raises(ValueError, match="material"):
         C.calibrate_variants([("teak", 8, 120)], runner=power_law_runner)
     assert CALLS == []
+
+
+def test_a_contact_rows_strength_is_fitted_beside_k1():
+    """A yield effect's strength fitted with k1: a pellet whose density follows the effect's
+    law, k1 (rho_w / 680)^n, gives back k1 and n from the densities of two woods at two
+    pressures."""
+    def runner(spec):
+        c = spec.preset.contact
+        k1 = c.k1 * (c.wood_density / c.wood_density_reference) ** c.wood_density_yield
+        return power_law_runner(dataclasses.replace(spec, preset=spec.preset.with_(
+            contact=dataclasses.replace(c, k1=k1, k2=4 * k1, wood_density_yield=0.0))))
+
+    truth = {"k1": 5e4, "contact.wood_density_yield": 2.0}
+    targets = []
+    for rho in (500.0, 700.0):
+        for sz in (60e6, 120e6):
+            t = C.Targets(sigma_z=sz, bulk_density=1.0, bulk_density_sd=5.0, wood_density=rho)
+            out = runner(C.make_spec(truth, sigma_z=sz, diametral=False, contact=t.condition_rows()))["outputs"]
+            targets.append(dataclasses.replace(t, bulk_density=out["bulk_density_relaxed"]))
+    res = C.fit({"k1": (1e4, 2e5, 1e5), "contact.wood_density_yield": (0.3, 5.0, 1.0)}, targets, runner=runner,
+                max_runs=20, tol=0.05)
+    assert res.params["k1"] == pytest.approx(5e4, rel=0.05)
+    assert res.params["contact.wood_density_yield"] == pytest.approx(2.0, rel=0.05)
+    assert C.make_spec({"contact.wood_density_yield": 1.5}).preset.contact.wood_density_yield == 1.5
+    with pytest.raises(ValueError, match="contact.no_such_row"):
+        C.make_spec({"contact.no_such_row": 1.0})
+    with pytest.raises(ValueError, match="contact.wood_density_yield"):
+        C.fit({"contact.wood_density_yield": (-1.0, 2.0)}, targets, runner=runner)

@@ -76,6 +76,15 @@ def _main(argv):
     (["--packings", "0"], "--packings", "1..64"),
     (["--packings", "65"], "--packings", "1..64"),
     (["--data", "example", "--packings", "1"], "--packings", "2..64"),
+    (["--set", "contact.wood_density=500"], "contact.wood_density", "particle density"),
+    (["--fit", "wood_density_yield=0.3:4"], "--fit", "contact.NAME=LO:HI"),
+    (["--fit", "contact.wood_density_yield=4:0.3"], "--fit", "0 < LO < HI"),
+    (["--fit", "contact.wood_density_yield=-1:4"], "--fit", "0 < LO < HI"),
+    (["--fit", "contact.wood_density_yield=0.3:40"], "contact.wood_density_yield", "allowed"),
+    (["--fit", "contact.k1=1e4:1e5"], "--fit", "k1 is fitted already"),
+    (["--fit", "contact.moisture_content=5:20"], "contact.moisture_content", "each condition's moisture"),
+    (["--fit", "contact.wood_density_yield=0.3:4", "--compaction-runs", "0"], "--fit", "--compaction-runs 1"),
+    (["--fit", "contact.wood_density_yield=0.3:4", "--data", "example"], "--fit", "manifest"),
 ])
 def test_bad_arguments_exit_2_naming_the_argument_before_any_work(extra, name, allowed, no_calibration, capsys,
                                                                   tmp_path):
@@ -256,6 +265,46 @@ def test_each_variant_runs_at_its_own_moisture_content(tmp_path):
     with pytest.raises(ValueError, match="moisture_content"):
         calibration_dir.calibrate_into(tmp_path / "bad", two, "tiny", settings={"contact.moisture_content": 20.0},
                                        runner=runner, log=lambda s: None)
+
+
+def test_each_wood_relaxes_its_own_pellets_where_its_density_acts(tmp_path):
+    """With wood_density_yield on, a variant's runs carry its wood's BD_w (Table 2) and each
+    material relaxes its own pellets, and the k1 fit asks each wood its own density; off, the
+    woods share one pellet."""
+    from pelletdem.measured import variant
+
+    seen = []
+
+    def runner(spec):
+        seen.append((spec.kind, spec.preset.contact.wood_density, spec.relax_key))
+        return power_law_runner(spec)
+
+    two = [("oak", 8, 120), ("pine", 8, 120)]
+    calibration_dir.calibrate_into(tmp_path / "off", two, "tiny", max_runs=1, compaction_runs=0, executor="serial",
+                                   runner=runner, log=lambda s: None)
+    assert len({rk for *_, rk in seen}) == 1 and {w for _, w, _ in seen} == {680.0}
+    seen.clear()
+    calibration_dir.calibrate_into(tmp_path / "on", two, "tiny", max_runs=1, compaction_runs=2, executor="serial",
+                                   settings={"contact.wood_density_yield": 1.5}, runner=runner, log=lambda s: None)
+    woods = {variant(*k).bd_wood for k in two}
+    assert {w for kind, w, _ in seen if kind == "diametral"} == woods
+    assert {w for kind, w, _ in seen if kind == "compaction"} == woods
+    assert len({rk for kind, _, rk in seen if kind == "compaction"}) >= 2
+    with pytest.raises(ValueError, match="wood_density"):
+        calibration_dir.calibrate_into(tmp_path / "bad", two, "tiny", settings={"contact.wood_density": 500.0},
+                                       runner=runner, log=lambda s: None)
+    # its strength fitted beside k1: every variant's runs then take the fitted law
+    seen.clear()
+    rep = calibration_dir.calibrate_into(tmp_path / "fit", two, "tiny", max_runs=1, compaction_runs=4,
+                                         executor="serial", fit={"contact.wood_density_yield": (0.3, 4.0, 1.5)},
+                                         runner=runner, log=lambda s: None)
+    n = rep.contact["wood_density_yield"]
+    assert 0.3 <= n <= 4.0 and {w for kind, w, _ in seen if kind == "diametral"} == woods
+    assert json.loads((tmp_path / "fit" / "calibration.json").read_text())["fit"] == {
+        "contact.wood_density_yield": [0.3, 4.0, 1.5]}
+    with pytest.raises(ValueError, match="compaction"):
+        calibration_dir.calibrate_into(tmp_path / "bad", two, "tiny", compaction_runs=0,
+                                       fit={"contact.wood_density_yield": (0.3, 4.0)}, runner=runner)
 
 
 def test_calibrate_into_from_an_earlier_calibration(tmp_path):

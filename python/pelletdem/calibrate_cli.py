@@ -6,8 +6,9 @@
     pelletdem calibrate PAPER --preset paper --max-runs 8 --from QUICK --dask HOST:8786   # hours
     pelletdem calibrate OUT_DIR --data FILE.toml                   # a user's data (a loop manifest)
 
-One shared loading stiffness k1 against Table 2's pellet densities, then E_b and sigma_c per
-variant against Table 3's sigma_f and dL_f/D. Writes calibration.csv, calibration.json, the
+One shared loading stiffness k1 against Table 2's pellet densities (with --fit, contact-law
+rows beside it: a yield effect's strength), then E_b and sigma_c per variant against Table
+3's sigma_f and dL_f/D. Writes calibration.csv, calibration.json, the
 Fig. 15 plots and Fig. 10 for the relaxed pellets into OUT_DIR (pelletdem.calibration_dir).
 Every run is cached in OUT_DIR/cache: the same command again resumes where a stopped one
 ended and runs nothing twice. --from DIR starts from an earlier calibration (its k1 and bond
@@ -70,6 +71,10 @@ def add_arguments(p: argparse.ArgumentParser, *, preset: str = "tiny", max_runs:
     p.add_argument("--packings", type=int, default=None, metavar="N",
                    help=f"packings every point averages (the paper's variants: 1..64, default 1; "
                         f"with --data: 2..64, default {DATA_PACKINGS})")
+    p.add_argument("--fit", action="append", default=[], metavar="contact.NAME=LO:HI",
+                   help="fit this contact-law row too, beside k1 in the shared compaction fit (a positive "
+                        "strength, in log space; starts at its --set value), e.g. "
+                        "contact.wood_density_yield=0.3:4 (repeatable)")
     p.add_argument("--set", action="append", default=[], metavar="LAW.NAME=VALUE",
                    help="set a contact or bond law parameter, e.g. contact.mu=0.4 (SI units; repeatable; "
                         "not the fitted bond.youngs_modulus, bond.sigma_c, bond.tau_c)")
@@ -112,6 +117,41 @@ def parse_variants(items):
     return out
 
 
+def parse_fit(items, settings, compaction_runs: int) -> dict:
+    """{'contact.<field>': (lo, hi, start)} of ``--fit contact.NAME=LO:HI`` items: rows of the
+    contact law fitted beside k1, in log space (0 < LO < HI), started at their ``settings``
+    value (--set) where it lies inside, else at the bounds' geometric mean. ValueError naming
+    the first bad item."""
+    from .law_settings import parse_setting
+    from .loop_simulators import refuse_condition_rows
+
+    out = {}
+    for item in items or ():
+        name, eq, rng = str(item).partition("=")
+        name = name.strip()
+        lo_text, colon, hi_text = rng.partition(":")
+        if not eq or not colon or not name.startswith("contact."):
+            raise ValueError(f"--fit {item!r}: expected contact.NAME=LO:HI (a contact-law row)")
+        refuse_condition_rows([name], "--fit")
+        if name in ("contact.k1", "contact.k2"):
+            raise ValueError(f"--fit {item!r}: k1 is fitted already (k2 follows it)")
+        try:
+            lo, hi = float(lo_text), float(hi_text)
+        except ValueError:
+            raise ValueError(f"--fit {item!r}: LO and HI must be numbers") from None
+        if not (math.isfinite(lo) and math.isfinite(hi) and 0.0 < lo < hi):
+            raise ValueError(f"--fit {item!r}: need 0 < LO < HI, finite (the fit is in log space)")
+        parse_setting(name, lo)  # the row exists and takes both ends
+        parse_setting(name, hi)
+        if name in out:
+            raise ValueError(f"--fit {name} given twice")
+        given = settings.get(name)
+        out[name] = (lo, hi, float(given) if given is not None and lo <= given <= hi else math.sqrt(lo * hi))
+    if out and not compaction_runs:
+        raise ValueError("--fit needs the compaction fit: --compaction-runs 1 or more")
+    return out
+
+
 def check(args) -> dict:
     """The keyword arguments of :func:`pelletdem.calibration_dir.calibrate_into` for ``args``;
     ValueError naming the first bad argument and its allowed range, before any work."""
@@ -131,8 +171,11 @@ def check(args) -> dict:
             raise ValueError(f"--{name.replace('_', '-')} = {v} is out of range: allowed {lo}..{hi}")
     variants = parse_variants(args.variant)
     settings = parse_settings(args.set)
+    fit_rows = parse_fit(args.fit, settings, args.compaction_runs)
+    if fit_rows and args.source is not None:
+        raise ValueError("--fit with --from: the contact law comes from that calibration, no compaction fit runs")
     if args.data is not None:
-        for flag, given in (("--variant", args.variant), ("--from", args.source)):
+        for flag, given in (("--variant", args.variant), ("--from", args.source), ("--fit", args.fit)):
             if given:
                 raise ValueError(f"{flag} is for the paper's variants; with --data the manifest says what is fitted")
         if args.packings is not None and not 2 <= args.packings <= 64:
@@ -167,7 +210,7 @@ def check(args) -> dict:
                              "pip install distributed")
     return dict(variants=variants, preset=args.preset or args.preset_default, max_runs=args.max_runs,
                 compaction_runs=args.compaction_runs, packings=args.packings or 1, source=args.source,
-                settings=settings, max_workers=args.workers)
+                settings=settings, fit=fit_rows, max_workers=args.workers)
 
 
 def run(args) -> int:

@@ -18,7 +18,7 @@ import json
 import os
 import time
 from pathlib import Path
-from typing import Callable, Mapping, Optional, Union
+from typing import Callable, Mapping, Optional, Sequence, Union
 
 from .law_settings import apply_settings
 from .laws import BondLaw
@@ -96,7 +96,8 @@ def load_calibration(directory: Union[str, os.PathLike]) -> dict:
 
 def calibrate_into(out: Union[str, os.PathLike], variants=None, preset="tiny", *, max_runs: int = 4,
                    compaction_runs: int = 2, packings: int = 1, source: Optional[Union[str, os.PathLike]] = None,
-                   settings: Optional[Mapping[str, object]] = None, executor=None,
+                   settings: Optional[Mapping[str, object]] = None,
+                   fit: Optional[Mapping[str, Sequence[float]]] = None, executor=None,
                    max_workers: Optional[int] = None, runner: Callable[[RunSpec], dict] = run_point,
                    log: Callable[[str], None] = print) -> CalibrationReport:
     """Calibrate ``variants`` (default all 12; Variants or (material, mc %, sigma_z MPa) keys)
@@ -111,7 +112,9 @@ def calibrate_into(out: Union[str, os.PathLike], variants=None, preset="tiny", *
     on a smaller preset: its contact law (k1, k2) and bond fits are used in place of the
     compaction fit and Table 5's starting values, so one pellet per pressure is relaxed.
     ``settings``: {'contact.X': v, 'bond.Y': w} (SI; :mod:`pelletdem.law_settings`) applied
-    to the preset's contact law and the base bond law before fitting. ``executor``,
+    to the preset's contact law and the base bond law before fitting. ``fit``:
+    {'contact.<field>': (lo, hi) or (lo, hi, start)}: contact-law rows fitted beside k1 in the
+    compaction fit (positive, log space). ``executor``,
     ``max_workers``, ``runner``: as in ``calibrate_variants`` (a Dask ``distributed.Client``
     is an executor). ``log``: where the report's text goes. The preset runs with the paper's
     overlap guard (:func:`pelletdem.loop_paper.paper_preset`), as the loop's paper variants
@@ -122,6 +125,8 @@ def calibrate_into(out: Union[str, os.PathLike], variants=None, preset="tiny", *
 
     if isinstance(packings, bool) or not isinstance(packings, int) or not 1 <= packings <= 64:
         raise ValueError(f"packings = {packings!r}: allowed an integer 1..64")
+    if fit and (source is not None or not compaction_runs):
+        raise ValueError("fit = {...} needs the compaction fit: compaction_runs >= 1 and no source")
     p = paper_preset(preset)
     settings = dict(settings or {})
     contact, bond = apply_settings(p.contact, BondLaw(), settings)
@@ -132,7 +137,7 @@ def calibrate_into(out: Union[str, os.PathLike], variants=None, preset="tiny", *
         setup = dict(compaction=None, contact=src["contact"], start=src["bond_start"])
     elif compaction_runs:
         k1 = p.contact.k1
-        setup = dict(compaction={"k1": (k1 / 10, k1 * 10, k1)}, compaction_max_runs=compaction_runs)
+        setup = dict(compaction={"k1": (k1 / 10, k1 * 10, k1), **dict(fit or {})}, compaction_max_runs=compaction_runs)
     else:
         setup = dict(compaction=None)
     out = Path(out)
@@ -146,6 +151,7 @@ def calibrate_into(out: Union[str, os.PathLike], variants=None, preset="tiny", *
     report.table.to_csv(out / "calibration.csv", index=False)
     (out / CALIBRATION_FILE).write_text(json.dumps({
         "preset": p.name, "variants": [v.label for v in vs], "packings": packings, "set": settings,
+        "fit": {k: list(v) for k, v in (fit or {}).items()},
         "contact": report.contact,
         "bond_start": report.bond_start(), "from": os.fspath(source) if source is not None else None,
         "n_simulations": report.n_simulations, "n_cached": report.n_cached,

@@ -88,6 +88,10 @@ def synthetic_truth(spec: str) -> dict:
     name, _, value = spec.partition("=")
     if name in EFFECTS:
         e = EFFECTS[name]
+        if e.needs == "material":
+            raise ValueError(f"--synthetic {spec!r}: {name} acts between woods of different densities, and "
+                             "synthetic data are of one material: use --data paper --materials oak,birch,pine "
+                             "or a manifest of several materials")
         try:
             v = float(value) if value else e.probe
         except ValueError:

@@ -214,15 +214,17 @@ class FunctionSimulator(Simulator):
 
 
 #: Law rows that each condition sets (the contact law's moisture content is the condition's mc).
-CONDITION_ROWS = ("contact.moisture_content",)
+#: Law rows each condition sets: its moisture content, its material's wood density.
+CONDITION_ROWS = {"contact.moisture_content": "moisture content (mc)",
+                  "contact.wood_density": "material's particle density (BD_w)"}
 
 
 def refuse_condition_rows(names, flag: str = "") -> None:
     """ValueError when one of ``names`` is a row each condition sets (:data:`CONDITION_ROWS`)."""
     for n in names:
         if n in CONDITION_ROWS:
-            raise ValueError(f"{flag + ' ' if flag else ''}{n} is set by each condition's moisture content "
-                             "(mc): do not set or fit it")
+            raise ValueError(f"{flag + ' ' if flag else ''}{n} is set by each condition's {CONDITION_ROWS[n]}: "
+                             "do not set or fit it")
 
 
 class EngineSimulator(Simulator):
@@ -244,7 +246,9 @@ class EngineSimulator(Simulator):
     quasi-static (the mass is scaled for the time step), so a material's density changes the
     bulk density its relaxed packing has, not the packing: the predicted bulk density is the
     simulated one times the material's density over the preset's, and one relaxed pellet serves
-    every material.
+    every material, unless the yield depends on the wood's density (``contact.wood_density_yield``
+    not 0): the condition's ``contact.wood_density`` is then its material's density, and each
+    material relaxes its own pellets.
     """
 
     def __init__(self, preset="tiny", *, bond=None, contact: Optional[Mapping[str, float]] = None,
@@ -253,8 +257,9 @@ class EngineSimulator(Simulator):
                  particle_density: Optional[Mapping[str, float]] = None):
         self.setup = run_setup(preset, bond if bond is not None else BondLaw(), dict(contact or {}),
                                tuple(seeds), max_dLD)
-        self._density_factor = {str(m): check_positive(f"particle_density[{m}]", v, "kg/m^3")
-                                / self.setup.preset.density for m, v in (particle_density or {}).items()}
+        self._density = {str(m): check_positive(f"particle_density[{m}]", v, "kg/m^3")
+                         for m, v in (particle_density or {}).items()}
+        self._density_factor = {m: v / self.setup.preset.density for m, v in self._density.items()}
         if break_drop:
             self.end_at_break(break_drop)
         self.default_seeds = tuple(int(s) for s in seeds)
@@ -310,6 +315,11 @@ class EngineSimulator(Simulator):
                 base[name] = v
         refuse_condition_rows([*params, *(f"contact.{k}" for k in contact)])
         contact["moisture_content"] = float(cond.mc)
+        if contact.get("wood_density_yield", self.setup.preset.contact.wood_density_yield) != 0.0:
+            if cond.material not in self._density:
+                raise ValueError(f"wood_density_yield acts but material {cond.material!r} has no particle_density: "
+                                 f"give one (kg/m^3) for each of the data's materials")
+            contact["wood_density"] = self._density[cond.material]
         for alias, fld in _ALIASES:
             if alias in base and fld in (contact if fld in ("k1",) else bond):
                 raise ValueError(f"{alias} and {'contact' if fld == 'k1' else 'bond'}.{fld} both set: give one")

@@ -42,7 +42,9 @@ class Targets:
     ``bulk_density`` / ``bulk_density_sd``: kg/m^3 of the pellet ``density_state`` 'relaxed'
     (Table 2's pellets) or 'max' (at the end of compaction). Leave out what is not measured.
     ``mc_percent``: the moisture content (%) the pellet is made at, the contact law's
-    ``moisture_content`` for its runs (the moisture effects read it); None keeps the law's.
+    ``moisture_content`` for its runs (the moisture effects read it); ``wood_density``: the
+    bulk density (kg/m^3) of the wood its particles are cut from, the law's ``wood_density``
+    (wood_density_yield reads it). None keeps the law's.
     """
 
     sigma_z: float
@@ -56,12 +58,16 @@ class Targets:
     curve: Any = None
     label: str = ""
     mc_percent: Optional[float] = None
+    wood_density: Optional[float] = None
 
     def __post_init__(self):
         check_positive("sigma_z", self.sigma_z, "Pa")
         if self.mc_percent is not None and not (isinstance(self.mc_percent, (int, float))
                                                 and 0.0 <= self.mc_percent <= 100.0):
             raise ValueError(f"mc_percent = {self.mc_percent!r} is out of range: allowed 0..100 %")
+        if self.wood_density is not None:
+            check_positive("wood_density", self.wood_density, "kg/m^3")
+
         for name in ("sigma_f", "dLf_D", "bulk_density"):
             v = getattr(self, name)
             if v is not None:
@@ -77,6 +83,12 @@ class Targets:
             raise ValueError(f"density_state = {self.density_state!r}: allowed 'relaxed', 'max'")
         if not (self.diametral or self.bulk_density is not None):
             raise ValueError("a Targets needs sigma_f, dLf_D, a curve or bulk_density")
+
+    def condition_rows(self) -> dict:
+        """The contact-law rows of this target's condition, for its runs: ``moisture_content``
+        (%) and ``wood_density`` (kg/m^3) where given."""
+        rows = {"moisture_content": self.mc_percent, "wood_density": self.wood_density}
+        return {k: float(v) for k, v in rows.items() if v is not None}
 
     @property
     def diametral(self) -> bool:
@@ -163,8 +175,8 @@ def score(outputs: Mapping[str, float], target: Targets, curve: Optional[Mapping
     return out
 
 
-def compaction_targets(variants=None, state: str = "relaxed",
-                       particle_density: Optional[float] = None, by_mc: bool = False) -> List[Targets]:
+def compaction_targets(variants=None, state: str = "relaxed", particle_density: Optional[float] = None,
+                       by_mc: bool = False, by_material: bool = False) -> List[Targets]:
     """One bulk-density target per compaction pressure, shared by all materials (Table 2).
 
     For each pressure of ``variants`` (default the 12): the mean of the variants' pellet bulk
@@ -175,7 +187,8 @@ def compaction_targets(variants=None, state: str = "relaxed",
     that woods of different densities ask one contact law for one solid fraction; None keeps
     Table 2's densities as they are. ``by_mc``: one target per pressure and moisture content
     (its ``mc_percent`` set), for a contact law whose moisture effect makes wet and dry
-    pellets differ; False pools the moisture contents.
+    pellets differ; ``by_material``: one per pressure and material (its ``wood_density`` the
+    material's BD_w), for a law whose yield depends on the wood's density. False pools them.
     """
     from .paper_tables import variants as all_variants
 
@@ -183,19 +196,19 @@ def compaction_targets(variants=None, state: str = "relaxed",
     if particle_density is not None:
         check_positive("particle_density", particle_density, "kg/m^3")
     out = []
-    keys = sorted({(v.sigma_z, v.mc_percent if by_mc else None) for v in vs},
-                  key=lambda k: (k[0], -1.0 if k[1] is None else k[1]))
-    for sz, mc in keys:
-        group = [v for v in vs if v.sigma_z == sz and (mc is None or v.mc_percent == mc)]
+    keys = sorted({(v.sigma_z, v.mc_percent if by_mc else -1.0, v.material if by_material else "") for v in vs})
+    for sz, mc, material in keys:
+        group = [v for v in vs if v.sigma_z == sz and mc in (-1.0, v.mc_percent) and material in ("", v.material)]
         scale = np.array([particle_density / v.bd_wood if particle_density is not None else 1.0 for v in group])
         means = np.array([v.bd_pellet for v in group]) * scale
         sds = np.array([v.bd_pellet_sd for v in group]) * scale
         between = float(np.std(means, ddof=1)) if len(means) > 1 else 0.0
         sd = float(math.sqrt(np.mean(sds**2) + between**2))
-        at = f"{sz / _MPA:g} MPa" + ("" if mc is None else f", MC {mc:g} %")
+        at = ", ".join([f"{sz / _MPA:g} MPa", *([f"MC {mc:g} %"] if by_mc else []), *([material] if by_material else [])])
         out.append(Targets(sigma_z=sz, bulk_density=float(means.mean()), bulk_density_sd=sd,
                            density_state=state, label=f"BD at {at} (mean of {len(group)})",
-                           mc_percent=None if mc is None else float(mc)))
+                           mc_percent=float(mc) if by_mc else None,
+                           wood_density=group[0].bd_wood if by_material else None))
     return out
 
 

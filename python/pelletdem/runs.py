@@ -34,7 +34,7 @@ import numpy as np
 
 from ._version import __version__
 from .effects import EFFECTS
-from .engine import BondLaw, k1_from_yield_strength
+from .engine import BondLaw, ContactLaw, k1_from_yield_strength
 from .presets import Preset, get_preset
 
 __all__ = [
@@ -215,6 +215,29 @@ def check_names(names: Iterable[str], allowed: Mapping[str, Any], what: str = "p
             raise ValueError(f"unknown {what} {n!r}: allowed {sorted(allowed)}")
 
 
+def contact_row_unit(name: str) -> Optional[str]:
+    """The unit of ``name`` when it is a contact-law row given as ``contact.<field>`` (a fit or
+    scan may vary one, e.g. a yield effect's strength), else None."""
+    if not name.startswith("contact."):
+        return None
+    rows = {r.name: r for r in ContactLaw.rows()}
+    field = name[len("contact."):]
+    if field not in rows:
+        raise ValueError(f"unknown contact law row {name!r}: allowed contact.<field> with a field of "
+                         f"{sorted(rows)}")
+    return rows[field].unit
+
+
+def parameter_unit(name: str) -> str:
+    """The SI unit of a fit or scan parameter: one of :data:`PARAMETERS`, or a contact-law row
+    ``contact.<field>``; ValueError naming an unknown one and the allowed names."""
+    unit = contact_row_unit(name)
+    if unit is not None:
+        return unit
+    check_names([name], {**PARAMETERS, **SCAN_ONLY_PARAMETERS})
+    return {**PARAMETERS, **SCAN_ONLY_PARAMETERS}[name][0]
+
+
 def make_spec(params: Optional[Mapping[str, float]] = None, *, preset="tiny", sigma_z: float = 120e6,
               seed: int = 0, bond: Optional[BondLaw] = None, diametral: bool = True,
               contact: Optional[Mapping[str, Any]] = None, max_dLD: Optional[float] = None) -> RunSpec:
@@ -223,16 +246,19 @@ def make_spec(params: Optional[Mapping[str, float]] = None, *, preset="tiny", si
     ``preset``: name or Preset. ``contact``: ContactLaw field overrides (e.g. ``{"k1": 5e4,
     "k2": 2e5}``) applied before ``params``. ``bond``: the base BondLaw (default BondLaw());
     ``params`` E_b, sigma_c, tau_c, r_b change it, k1 / p_y change the contact law (k2/k1 kept),
-    sigma_z (Pa) the pressure. ``diametral=False`` gives a compaction-only run (no bond).
+    ``contact.<field>`` sets that contact-law row (after ``contact``), sigma_z (Pa) the pressure. ``diametral=False`` gives a compaction-only run (no bond).
     ``max_dLD``: end of the diametral test (default the preset's). Raises ValueError naming a
     bad parameter.
     """
     params = dict(params or {})
-    check_names(params, {**PARAMETERS, **SCAN_ONLY_PARAMETERS})
+    for name in params:
+        parameter_unit(name)  # a known name
+    rows = {n[len("contact."):]: params.pop(n) for n in list(params) if n.startswith("contact.")}
     p = as_preset(preset)
+    contact = {**dict(contact or {}), **{k: float(v) for k, v in rows.items()}}
     if contact:
         check_names(contact, {f.name: f for f in dataclasses.fields(p.contact)}, "contact law field")
-        p = p.with_(contact=dataclasses.replace(p.contact, **dict(contact)))
+        p = p.with_(contact=dataclasses.replace(p.contact, **contact))
     if max_dLD is not None:
         p = p.with_(max_dLD=check_positive("max_dLD", max_dLD, "-"))
     for name, v in params.items():
@@ -275,16 +301,19 @@ def make_spec(params: Optional[Mapping[str, float]] = None, *, preset="tiny", si
 def parse_bounds(params: Mapping[str, Sequence[float]], start: Optional[Mapping[str, float]] = None):
     """(names, ln lo, ln hi, ln start) of ``params`` {name: (lo, hi) or (lo, hi, start)} (SI,
     names from :data:`PARAMETERS`); ``start`` {name: value} overrides the
-    third entries, and a missing start is the geometric mean of the bounds. ValueError naming
+    third entries, and a missing start is the geometric mean of the bounds; a contact-law row
+    ``contact.<field>`` (a positive strength) may be fitted too. ValueError naming
     the parameter for bad names, reversed or non-positive bounds, NaN, or a start outside."""
     if not isinstance(params, Mapping) or not params:
         raise ValueError("params must be a non-empty mapping {name: (lo, hi)} or {name: (lo, hi, start)}")
-    check_names(params, PARAMETERS)
+    for name in params:
+        if contact_row_unit(name) is None:
+            check_names([name], PARAMETERS)
     if start is not None:
         check_names(start, params, "start parameter (not among the fitted ones)")
     names, lo, hi, x0 = [], [], [], []
     for name, b in params.items():
-        unit = PARAMETERS[name][0]
+        unit = parameter_unit(name)
         try:
             vals = [float(v) for v in b]
         except (TypeError, ValueError):
@@ -329,13 +358,12 @@ class RunSetup:
     max_dLD: Optional[float]
 
     def spec(self, params: Mapping[str, float], sigma_z: float, seed: int, diametral: bool,
-             mc_percent: Optional[float] = None) -> RunSpec:
+             condition: Optional[Mapping[str, float]] = None) -> RunSpec:
         """The :class:`RunSpec` of ``params`` (SI, see :func:`make_spec`) at ``sigma_z`` (Pa)
-        and ``seed``; a compaction-only run unless ``diametral``. ``mc_percent``: the moisture
-        content (%) it is made at, the contact law's ``moisture_content`` (None: the law's)."""
-        contact = self.contact
-        if mc_percent is not None:
-            contact = {**(contact or {}), "moisture_content": float(mc_percent)}
+        and ``seed``; a compaction-only run unless ``diametral``. ``condition``: contact-law
+        rows the condition sets over the setup's (its ``moisture_content``, ``wood_density``:
+        :meth:`pelletdem.objectives.Targets.condition_rows`)."""
+        contact = {**(self.contact or {}), **(condition or {})} if condition else self.contact
         return make_spec(params, preset=self.preset, sigma_z=sigma_z, seed=seed, bond=self.bond,
                          diametral=diametral, contact=contact, max_dLD=self.max_dLD)
 

@@ -62,6 +62,7 @@ from .runs import (
     RunSpec,
     check_names,
     check_positive,
+    parameter_unit,
     parse_bounds,
     run_setup,
 )
@@ -119,7 +120,7 @@ class _Problem:
 
     def specs(self, params: Mapping[str, float]) -> List[List[RunSpec]]:
         p = {**self.fixed, **params}
-        return [[self.setup.spec(p, t.sigma_z, s, t.diametral, t.mc_percent) for s in self.setup.seeds]
+        return [[self.setup.spec(p, t.sigma_z, s, t.diametral, t.condition_rows()) for s in self.setup.seeds]
                 for t in self.targets]
 
     def evaluate(self, params: Mapping[str, float], ev: Evaluator) -> _Point:
@@ -221,7 +222,8 @@ class ScanResult:
 def _grid(param_grid: Mapping[str, Sequence[float]]) -> Tuple[List[str], List[dict]]:
     if not isinstance(param_grid, Mapping) or not param_grid:
         raise ValueError("param_grid must be a non-empty mapping {name: [values]}")
-    check_names(param_grid, {**PARAMETERS, **SCAN_ONLY_PARAMETERS})
+    for name in param_grid:
+        parameter_unit(name)  # PARAMETERS, 'seed' or a contact-law row
     names = list(param_grid)
     axes = []
     for n in names:
@@ -279,7 +281,7 @@ def scan(param_grid: Mapping[str, Sequence[float]], targets=None, *, preset="tin
             seed_list = [p["seed"]] if "seed" in p else setup.seeds
             for s in seed_list:
                 specs.append(setup.spec({k: v for k, v in p.items() if k != "seed"}, sz, s, dia,
-                                        t.mc_percent if t is not None else None))
+                                        t.condition_rows() if t is not None else None))
                 index.append((pi, ti, s))
     with open_executor(executor, max_workers) as ex:
         ev = Evaluator(cache, ex, with_relaxed_dir(runner, relaxed_dir), relaxed_shared=relaxed_dir is not None)
@@ -489,7 +491,7 @@ def fit(params: Mapping[str, Sequence[float]], targets, *, start: Optional[Mappi
         relaxed_dir: Optional[Union[str, os.PathLike]] = None,
         verbose: bool = False, evaluator: Optional[Evaluator] = None) -> FitResult:
     """Fit ``params`` ({name: (lo, hi)} or {name: (lo, hi, start)}, SI, names from
-    :data:`PARAMETERS`) so the simulations match ``targets`` (a :class:`Targets` or a list,
+    :data:`PARAMETERS`, or a contact-law row ``contact.<field>``) so the simulations match ``targets`` (a :class:`Targets` or a list,
     each at its own sigma_z).
 
     ``method``: 'scaling' (default: log-space Gauss-Newton started from the paper's scaling
@@ -519,11 +521,13 @@ def fit(params: Mapping[str, Sequence[float]], targets, *, start: Optional[Mappi
         raise ValueError(f"method = {method!r}: allowed 'scaling', 'nelder-mead'")
     names, lo, hi, x0 = parse_bounds(params, start)
     if fixed:
-        check_names(fixed, PARAMETERS, "fixed parameter")
         for n, v in fixed.items():
+            if not n.startswith("contact."):
+                check_names([n], PARAMETERS, "fixed parameter")
+            unit = parameter_unit(n)
             if n in names:
                 raise ValueError(f"parameter {n!r} is both fitted and fixed")
-            check_positive(n, v, PARAMETERS[n][0])
+            check_positive(n, v, unit)
     check_positive("tol", tol, "-")
     check_positive("max_step", max_step, "-")
     check_positive("min_step", min_step, "-")

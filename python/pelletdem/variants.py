@@ -18,6 +18,7 @@ import concurrent.futures as cf
 import math
 import os
 import time
+import dataclasses
 from dataclasses import dataclass
 from typing import Any, Callable, Dict, Mapping, Optional, Sequence, Union
 
@@ -127,13 +128,15 @@ def calibrate_variants(variants=None, preset="tiny", *,
     sigma_z MPa) keys) on ``preset``.
 
     1. Compaction, shared by all materials: fit ``compaction`` ({'k1': (lo, hi)} in N/m or
-       {'p_y': (lo, hi)} in Pa; 'default' = k1 within a factor 10 of the preset's; None skips
-       it) so the simulated ``compaction_state`` ('relaxed' or 'max') bulk density at each
+       {'p_y': (lo, hi)} in Pa, optionally with contact-law rows {'contact.<field>': (lo, hi)}
+       such as a yield effect's strength; 'default' = k1 within a factor 10 of the preset's;
+       None skips it) so the simulated ``compaction_state`` ('relaxed' or 'max') bulk density at each
        pressure matches the mean of Table 2's pellet densities over the variants at that
        pressure, each taken to the preset's particle density at its own BD_p / BD_w (SD:
        within- and between-variant spread, :func:`compaction_targets`); k2/k1 stays fixed
        (e = 0.5). Where a moisture effect acts, wet and dry are their own targets, each run at
-       its moisture content. The paper fitted p_y to the compaction curves instead; Table 2 is
+       its moisture content; where the yield depends on the wood's density
+       (``wood_density_yield``), so is each material, run at its BD_w. The paper fitted p_y to the compaction curves instead; Table 2 is
        what ships with the package.
     2. Per variant, with that contact law: fit ``bond_params`` (default E_b in [1e5, 1e10] Pa,
        sigma_c in [1e4, 1e10] Pa, tau_c = sigma_c) against Table 3's sigma_f and dL_f/D with
@@ -188,8 +191,15 @@ def calibrate_variants(variants=None, preset="tiny", *,
                              "e.g. {'k1': 4e4, 'k2': 1.6e5}")
         make_spec({}, preset=p, diametral=False, contact=contact)  # names and values checked
     # each variant's own MC replaces the law's: one set elsewhere would be silently dropped
-    if "moisture_content" in (contact or {}) or p.contact.moisture_content != type(p.contact)().moisture_content:
-        raise ValueError("contact.moisture_content is set by each variant's moisture content: do not set it")
+    for row, what in (("moisture_content", "moisture content"), ("wood_density", "wood's BD_w (Table 2)")):
+        if row in (contact or {}) or getattr(p.contact, row) != getattr(type(p.contact)(), row):
+            raise ValueError(f"contact.{row} is set by each variant's {what}: do not set it")
+    # the law as the fit starts it: where its yield depends on the wood's density, each material
+    # relaxes its own pellets; where a moisture effect acts, each moisture content
+    rows = {n[len("contact."):]: (b[2] if len(b) == 3 else math.sqrt(b[0] * b[1]))
+            for n, b in (compaction or {}).items() if n.startswith("contact.")}
+    law = dataclasses.replace(p.contact, **{**dict(contact or {}), **rows})
+    by_material, by_mc = law.wood_density_yield != 0.0, law.to_core().moisture_acts()
     if not isinstance(start, (str, Mapping)) or (isinstance(start, str) and start != "table5"):
         raise ValueError(f"start = {start!r}: pass 'table5' or a mapping {{label: {{name: value}}}}")
     vlog = (lambda *a: print(*a, flush=True)) if verbose else (lambda *a: None)
@@ -201,13 +211,14 @@ def calibrate_variants(variants=None, preset="tiny", *,
         comp_fit = None
         if compaction is not None:
             vlog("[calibrate] compaction fit")
-            # wet and dry pellets are asked their own densities where a moisture effect acts
-            targets = compaction_targets(vs, compaction_state, p.density, by_mc=p.contact.to_core().moisture_acts())
+            # wet and dry pellets (and each wood, where its density acts) are asked their own
+            targets = compaction_targets(vs, compaction_state, p.density, by_mc=by_mc, by_material=by_material)
             comp_fit = fit(compaction, targets, preset=p, seeds=seeds,
                            tol=tol, max_runs=compaction_max_runs, evaluator=ev, verbose=verbose)
-            (name, val), = comp_fit.params.items()
-            k1 = val if name == "k1" else k1_from_yield_strength(val, p.radius_mean)
-            contact = {"k1": k1, "k2": k1 * p.contact.k2 / p.contact.k1}
+            fitted = dict(comp_fit.params)
+            k1 = fitted.pop("k1") if "k1" in fitted else k1_from_yield_strength(fitted.pop("p_y"), p.radius_mean)
+            contact = {"k1": k1, "k2": k1 * p.contact.k2 / p.contact.k1,
+                       **{n[len("contact."):]: v for n, v in fitted.items()}}
 
         # Densities of every variant's pressure under the shared contact law, first: these
         # runs relax one pellet per pressure and seed, all at once on the workers, and each
@@ -216,15 +227,21 @@ def calibrate_variants(variants=None, preset="tiny", *,
         # pellet at the same time. A cached run whose relaxed pellet is missing from
         # relaxed_dir (deleted, or a killed sitting) is run again to put it back.
         # Each variant's moisture content is its contact law's, which the moisture effects
-        # read; where none acts, wet and dry share one relaxed pellet (one run key).
-        groups = sorted({(v.sigma_z, v.mc_percent) for v in vs})
+        # read; where none acts, wet and dry share one relaxed pellet (one run key). Its wood's
+        # BD_w is the law's wood_density only where wood_density_yield reads it.
+        def group(v):
+            return (v.sigma_z, v.mc_percent, v.material if by_material else "")
+
+        groups = sorted({group(v) for v in vs})
+        wood = {v.material: v.bd_wood for v in vs}
         keep = relaxed_dir is not None and runner is run_point
 
         def missing(spec):
             return keep and not os.path.exists(relaxed_path(relaxed_dir, spec.relax_key))
 
-        def contact_at(mc):
-            return {**contact, "moisture_content": float(mc)}
+        def contact_at(mc, material=""):
+            return {**contact, "moisture_content": float(mc),
+                    **({"wood_density": float(wood[material])} if material else {})}
 
         submitted = {}
 
@@ -233,12 +250,12 @@ def calibrate_variants(variants=None, preset="tiny", *,
                 submitted[spec.key] = ev.submit(spec, rerun=missing(spec))
             return submitted[spec.key]
 
-        pending = {(sz, mc): [submit_once(make_spec({}, preset=p, sigma_z=sz, seed=s, diametral=False,
-                                                    contact=contact_at(mc)))
-                              for s in run_setup(p, None, None, seeds, None).seeds] for sz, mc in groups}
+        pending = {(sz, mc, m): [submit_once(make_spec({}, preset=p, sigma_z=sz, seed=s, diametral=False,
+                                                    contact=contact_at(mc, m)))
+                              for s in run_setup(p, None, None, seeds, None).seeds] for sz, mc, m in groups}
 
         def one(v):
-            for f in pending[(v.sigma_z, v.mc_percent)]:
+            for f in pending[group(v)]:
                 f.result()
             st = {}
             if start == "table5":
@@ -259,7 +276,7 @@ def calibrate_variants(variants=None, preset="tiny", *,
                 pv = p.with_(break_drop=break_drop, break_from_dLD=round(0.5 * max(v.dLf_D - 2 * v.dLf_D_sd, 0.0), 4))
             vlog(f"[calibrate] {v.label}: start {sp}, max_dLD {mdl}, break at {pv.break_drop} of the peak")
             return fit(bond_params, tg, start=sp or None, preset=pv, seeds=seeds, bond=bond,
-                       contact=contact_at(v.mc_percent),
+                       contact=contact_at(*group(v)[1:]),
                        max_dLD=mdl, tol=tol, max_runs=max_runs, evaluator=ev, verbose=verbose)
 
         with cf.ThreadPoolExecutor(max_workers=len(vs), thread_name_prefix="calibrate") as drivers:
@@ -283,7 +300,7 @@ def calibrate_variants(variants=None, preset="tiny", *,
         outs = f.outputs[0] if f.outputs else {}
         # The particles are pieces of the variant's own wood: its pellet has the simulated
         # solid fraction times Table 2's BD_w (the presets' 680 kg/m^3 is oak's).
-        at = (v.sigma_z, v.mc_percent)
+        at = group(v)
         bd = dens.get(at, {}).get("bulk_density_" + compaction_state, float("nan")) * v.bd_wood / p.density
         bd_se = dens_se.get(at, float("nan")) * v.bd_wood / p.density
         bd_sd = math.hypot(max(v.bd_pellet_sd, 0.01 * v.bd_pellet), bd_se if math.isfinite(bd_se) else 0.0)

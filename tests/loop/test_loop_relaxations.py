@@ -104,6 +104,21 @@ def test_a_material_s_particle_density_scales_its_bulk_density_and_shares_the_re
             EngineSimulator("tiny", particle_density={"pine": bad})
 
 
+def test_where_the_wood_density_acts_each_material_relaxes_its_own_pellet():
+    from pelletdem.loop import Condition, EngineSimulator
+
+    base = {"E_b": 6e7, "sigma_c": 9e6, "contact.wood_density_yield": 1.5}
+    oak, birch = Condition(120e6, 8.0, "oak"), Condition(120e6, 8.0, "birch")
+    with EngineSimulator("tiny", particle_density={"birch": 550.0, "oak": 675.0}) as sim:
+        b = sim._spec(base, birch, 0)
+        assert b.preset.contact.wood_density == 550.0
+        assert b.relax_key != sim._spec(base, oak, 0).relax_key
+        with pytest.raises(ValueError, match="wood_density"):
+            sim._spec(base, Condition(120e6, 8.0, "pine"), 0)  # no density given for pine
+        with pytest.raises(ValueError, match="contact.wood_density is set by each condition"):
+            sim._spec({**base, "contact.wood_density": 500.0}, oak, 0)
+
+
 def test_the_engine_s_predictions_carry_each_material_s_density():
     from pelletdem.loop import Condition, EngineSimulator
 

@@ -72,10 +72,13 @@ def test_a_moisture_effect_is_hidden_in_data_of_two_moisture_contents_from_other
     assert synthetic_design(synthetic_truth("bond.moisture_coefficient=0"), 2)[0] == conds
     # every other effect: three pressures at MC 8 %, the replicates those of before
     assert synthetic_design(synthetic_truth("moisture_yield"), 2)[0] == conds
-    for name in set(EFFECTS) - {"moisture_bonds", "moisture_yield"}:
+    for name in set(EFFECTS) - {"moisture_bonds", "moisture_yield", "wood_density_yield"}:
         c, h, s = synthetic_design(synthetic_truth(name), 1)
         assert [x.sigma_z for x in c] == [60e6, 120e6, 90e6] and {x.mc for x in c} == {8.0}
         assert h == (c[-1],) and set(s.values()) == {tuple(k + 10 for k in DATA_SEEDS)}
+    # an effect between woods cannot hide in data of one material: said, not run
+    with pytest.raises(ValueError, match="materials"):
+        synthetic_truth("wood_density_yield")
 
 
 def test_the_command_lines_synthetic_data_hide_the_truth_in_the_draws_packings():

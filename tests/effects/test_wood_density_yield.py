@@ -1,0 +1,67 @@
+"""wood_density_yield (cpp effects/wood_density_yield.hpp): the loading line
+k1 (rho_w / rho_ref)^n delta. Two spheres pressed together follow it; unloaded they keep the
+residual overlap of eq. 5 with that k1; it multiplies with moisture_yield's factor; a line
+steeper than k2 is followed at k2; off, or at the reference density, it is the paper's."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from test_hardening import _drive, _press
+
+from test_contact_law import frictionless
+
+
+def _wood(n, rho, ref=680.0):
+    law = frictionless()
+    law.wood_density_yield, law.wood_density, law.wood_density_reference = n, rho, ref
+    return law
+
+
+@pytest.mark.parametrize("n,rho,ref", [(1.5, 510.0, 680.0), (2.0, 550.0, 680.0), (-1.0, 600.0, 680.0),
+                                       (1.5, 675.0, 500.0)])
+def test_loading_follows_the_wood_density_line(n, rho, ref):
+    law = _wood(n, rho, ref)
+    rows = _press(law, steps=2000)
+    fac = (rho / ref) ** n
+    assert fac * law.k1 < law.k2
+    np.testing.assert_allclose(rows[:, 1], fac * law.k1 * rows[:, 0], rtol=1e-9)
+    assert law.to_core().plain_pairs() and not law.to_core().moisture_acts()
+
+
+def test_the_residual_overlap_is_that_of_the_wood_k1():
+    """Loaded to delta_max and drawn apart, the pair unloads along k2 to zero force at the
+    residual overlap delta_max (1 - k1' / k2), k1' = k1 (510 / 680)^1.5 (eq. 5)."""
+    law = _wood(1.5, 510.0)
+    k1w = (510.0 / 680.0) ** 1.5 * law.k1
+    d_max = _press(law, steps=2000)[-1, 0]
+    d, f = _drive(law, [(0.01, 2000), (-0.01, 4000)]).T
+    top = int(np.argmax(d))
+    assert d[top] == pytest.approx(d_max, rel=1e-9)
+    unloading = slice(top + 1, None)
+    delta0 = d[top] * (1 - k1w / law.k2)
+    on_line = f[unloading] > 0
+    assert on_line.sum() > 100 and d[unloading][on_line].min() < 1.05 * delta0
+    np.testing.assert_allclose(f[unloading][on_line], law.k2 * (d[unloading][on_line] - delta0), rtol=1e-7,
+                               atol=1e-12)
+
+
+def test_it_multiplies_with_the_moisture_factor():
+    law = _wood(2.0, 550.0)
+    law.moisture_yield, law.moisture_content = -0.04, 20.0
+    rows = _press(law, steps=1000)
+    fac = (550.0 / 680.0) ** 2.0 * math.exp(0.04 * 12.0)
+    np.testing.assert_allclose(rows[:, 1], fac * law.k1 * rows[:, 0], rtol=1e-9)
+
+
+def test_a_line_steeper_than_k2_is_followed_at_k2():
+    law = _wood(-6.0, 500.0)  # (500/680)^-6 = 6.3 > k2 / k1 = 4
+    rows = _press(law, steps=1000)
+    np.testing.assert_allclose(rows[:, 1], law.k2 * rows[:, 0], rtol=1e-9)
+
+
+@pytest.mark.parametrize("law", [_wood(0.0, 510.0), _wood(1.5, 680.0)])
+def test_off_or_at_the_reference_density_it_is_the_paper_line(law):
+    rows = _press(law, steps=500)
+    np.testing.assert_allclose(rows[:, 1], law.k1 * rows[:, 0], rtol=1e-12)
