@@ -204,7 +204,8 @@ def compaction_targets(variants=None, state: str = "relaxed", particle_density: 
         sds = np.array([v.bd_pellet_sd for v in group]) * scale
         between = float(np.std(means, ddof=1)) if len(means) > 1 else 0.0
         sd = float(math.sqrt(np.mean(sds**2) + between**2))
-        at = ", ".join([f"{sz / _MPA:g} MPa", *([f"MC {mc:g} %"] if by_mc else []), *([material] if by_material else [])])
+        at = ", ".join([f"{sz / _MPA:g} MPa", *([f"MC {mc:g} %"] if by_mc else []),
+                        *([material] if by_material else [])])
         out.append(Targets(sigma_z=sz, bulk_density=float(means.mean()), bulk_density_sd=sd,
                            density_state=state, label=f"BD at {at} (mean of {len(group)})",
                            mc_percent=float(mc) if by_mc else None,

@@ -246,7 +246,8 @@ def make_spec(params: Optional[Mapping[str, float]] = None, *, preset="tiny", si
     ``preset``: name or Preset. ``contact``: ContactLaw field overrides (e.g. ``{"k1": 5e4,
     "k2": 2e5}``) applied before ``params``. ``bond``: the base BondLaw (default BondLaw());
     ``params`` E_b, sigma_c, tau_c, r_b change it, k1 / p_y change the contact law (k2/k1 kept),
-    ``contact.<field>`` sets that contact-law row (after ``contact``), sigma_z (Pa) the pressure. ``diametral=False`` gives a compaction-only run (no bond).
+    ``contact.<field>`` sets that contact-law row (after ``contact``), sigma_z (Pa) the
+    pressure. ``diametral=False`` gives a compaction-only run (no bond).
     ``max_dLD``: end of the diametral test (default the preset's). Raises ValueError naming a
     bad parameter.
     """

@@ -57,7 +57,6 @@ from .optimize import bounded_fd_step, levenberg_step, local_affine_model, nelde
 from .run_cache import RunCache
 from .runs import (
     PARAMETERS,
-    SCAN_ONLY_PARAMETERS,
     RunSetup,
     RunSpec,
     check_names,
@@ -491,8 +490,8 @@ def fit(params: Mapping[str, Sequence[float]], targets, *, start: Optional[Mappi
         relaxed_dir: Optional[Union[str, os.PathLike]] = None,
         verbose: bool = False, evaluator: Optional[Evaluator] = None) -> FitResult:
     """Fit ``params`` ({name: (lo, hi)} or {name: (lo, hi, start)}, SI, names from
-    :data:`PARAMETERS`, or a contact-law row ``contact.<field>``) so the simulations match ``targets`` (a :class:`Targets` or a list,
-    each at its own sigma_z).
+    :data:`PARAMETERS`, or a contact-law row ``contact.<field>``) so the simulations match
+    ``targets`` (a :class:`Targets` or a list, each at its own sigma_z).
 
     ``method``: 'scaling' (default: log-space Gauss-Newton started from the paper's scaling
     laws, see the module docstring; 3-6 runs for (E_b, sigma_c)) or 'nelder-mead' (scipy, in

@@ -15,10 +15,10 @@ column name (``_mpa``).
 from __future__ import annotations
 
 import concurrent.futures as cf
+import dataclasses
 import math
 import os
 import time
-import dataclasses
 from dataclasses import dataclass
 from typing import Any, Callable, Dict, Mapping, Optional, Sequence, Union
 
@@ -136,8 +136,8 @@ def calibrate_variants(variants=None, preset="tiny", *,
        within- and between-variant spread, :func:`compaction_targets`); k2/k1 stays fixed
        (e = 0.5). Where a moisture effect acts, wet and dry are their own targets, each run at
        its moisture content; where the yield depends on the wood's density
-       (``wood_density_yield``), so is each material, run at its BD_w. The paper fitted p_y to the compaction curves instead; Table 2 is
-       what ships with the package.
+       (``wood_density_yield``), so is each material, run at its BD_w. The paper fitted p_y
+       to the compaction curves instead; Table 2 is what ships with the package.
     2. Per variant, with that contact law: fit ``bond_params`` (default E_b in [1e5, 1e10] Pa,
        sigma_c in [1e4, 1e10] Pa, tau_c = sigma_c) against Table 3's sigma_f and dL_f/D with
        :func:`fit` (scaling method, ``tol``, ``max_runs`` points), starting from ``start``:

@@ -11,15 +11,15 @@
 
 #include "pelletdem/effect.hpp"
 
-#define PELLETDEM_ROWS_WoodDensityYield(X)                                                          \
-  X(double, wood_density_yield, 0.0, Range, -10.0, 10.0, "-", "wood_density_yield", true,           \
-    "n in k1 (rho_w / rho_ref)^n on the loading branch (rho_w, rho_ref: wood_density, "             \
-    "wood_density_reference); 0 off")                                                               \
-  X(double, wood_density, 680.0, Range, 50.0, 1500.0, "kg/m^3", "wood_density", true,               \
-    "bulk density BD_w of the intact wood the particles are cut from (the condition's material, "   \
-    "Table 2); only wood_density_yield reads it")                                                   \
-  X(double, wood_density_reference, 680.0, Range, 50.0, 1500.0, "kg/m^3", "wood_density_reference", \
-    true, "BD_w at which k1 holds: Table 4's particle density (oak)")
+#define PELLETDEM_ROWS_WoodDensityYield(X)                                                                \
+  X(double, wood_density_yield, 0.0, Range, -10.0, 10.0, "-", "wood_density_yield", true,                 \
+    "n in k1 (rho_w / rho_ref)^n on the loading branch (rho_w, rho_ref: wood_density, "                   \
+    "wood_density_reference); 0 off")                                                                     \
+  X(double, wood_density, 680.0, Range, 50.0, 1500.0, "kg/m^3", "wood_density", true,                     \
+    "bulk density BD_w of the intact wood the particles are cut from (the condition's material, "         \
+    "Table 2); only wood_density_yield reads it")                                                         \
+  X(double, wood_density_reference, 680.0, Range, 50.0, 1500.0, "kg/m^3", "wood_density_reference", true, \
+    "BD_w at which k1 holds: Table 4's particle density (oak)")
 
 namespace pelletdem {
 
