@@ -33,6 +33,21 @@ def _drive(law, phases):
     return np.array(rows)
 
 
+def _assert_unloads_from_its_loading_line(law, k1_line):
+    """Loaded to delta_max and drawn apart, the pair unloads along k2 to zero force at the
+    residual overlap delta_max (1 - k1_line / k2) (eq. 5), k1_line the slope it loaded along."""
+    d_max = _press(law, steps=2000)[-1, 0]
+    d, f = _drive(law, [(0.01, 2000), (-0.01, 4000)]).T
+    top = int(np.argmax(d))
+    assert d[top] == pytest.approx(d_max, rel=1e-9)
+    unloading = slice(top + 1, None)
+    delta0 = d[top] * (1 - k1_line / law.k2)
+    on_line = f[unloading] > 0
+    assert on_line.sum() > 100 and d[unloading][on_line].min() < 1.05 * delta0
+    np.testing.assert_allclose(f[unloading][on_line], law.k2 * (d[unloading][on_line] - delta0), rtol=1e-7,
+                               atol=1e-12)
+
+
 @pytest.mark.parametrize("h,n", [(5.0, 2.0), (10.0, 1.0)])
 def test_loading_follows_the_hardened_line(h, n):
     """Up to delta = 0.1 r*, where the hardened line is still less steep than k2 (a steeper

@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 import pytest
-from test_hardening import _drive, _press
+from test_hardening import _assert_unloads_from_its_loading_line, _press
 
 from test_contact_law import frictionless
 
@@ -34,17 +34,7 @@ def test_the_residual_overlap_is_that_of_the_wood_k1():
     """Loaded to delta_max and drawn apart, the pair unloads along k2 to zero force at the
     residual overlap delta_max (1 - k1' / k2), k1' = k1 (510 / 680)^1.5 (eq. 5)."""
     law = _wood(1.5, 510.0)
-    k1w = (510.0 / 680.0) ** 1.5 * law.k1
-    d_max = _press(law, steps=2000)[-1, 0]
-    d, f = _drive(law, [(0.01, 2000), (-0.01, 4000)]).T
-    top = int(np.argmax(d))
-    assert d[top] == pytest.approx(d_max, rel=1e-9)
-    unloading = slice(top + 1, None)
-    delta0 = d[top] * (1 - k1w / law.k2)
-    on_line = f[unloading] > 0
-    assert on_line.sum() > 100 and d[unloading][on_line].min() < 1.05 * delta0
-    np.testing.assert_allclose(f[unloading][on_line], law.k2 * (d[unloading][on_line] - delta0), rtol=1e-7,
-                               atol=1e-12)
+    _assert_unloads_from_its_loading_line(law, (510.0 / 680.0) ** 1.5 * law.k1)
 
 
 def test_it_multiplies_with_the_moisture_factor():
