@@ -26,6 +26,7 @@ EFFECTS = {
     "unloading_growth": {"unloading_growth": 7.0},
     "saturating_unloading": {"plastic_stiffness_ratio": 5.0},
     "moisture_yield": {"moisture_yield": 0.03, "moisture_content": 20.0},
+    "wood_density_yield": {"wood_density_yield": 1.5, "wood_density": 510.0},
 }
 
 #: Largest ratio of an effect's life to the paper's law's.

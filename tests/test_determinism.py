@@ -137,7 +137,8 @@ def test_vector_kernels_give_the_scalar_kernels_bits(n_side, threads):
 
 @pytest.mark.parametrize("effect", [{"hardening": 5.0}, {"hardening": 5.0, "hardening_exponent": 2.0},
                                     {"unloading_growth": 7.0}, {"plastic_stiffness_ratio": 5.0},
-                                    {"moisture_yield": 0.05, "moisture_content": 20.0}])
+                                    {"moisture_yield": 0.05, "moisture_content": 20.0},
+                                    {"wood_density_yield": 1.5, "wood_density": 510.0}])
 def test_vector_kernels_give_the_scalar_kernels_bits_with_a_contact_effect(effect):
     """The four-lane pair kernel runs a contact effect's hooks lane by lane: the same bits as
     the scalar kernel, bonds included, and not the paper's law's bits (the effect acts)."""
