@@ -33,6 +33,12 @@ def _drive(law, phases):
     return np.array(rows)
 
 
+def _assert_loads_along(law, slope, steps, rtol=1e-9):
+    """Pressed together for ``steps`` steps, the pair's force is ``slope`` (N/m) times the overlap."""
+    rows = _press(law, steps=steps)
+    np.testing.assert_allclose(rows[:, 1], slope * rows[:, 0], rtol=rtol)
+
+
 def _assert_unloads_from_its_loading_line(law, k1_line):
     """Loaded to delta_max and drawn apart, the pair unloads along k2 to zero force at the
     residual overlap delta_max (1 - k1_line / k2) (eq. 5), k1_line the slope it loaded along."""

@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 import pytest
-from test_hardening import _assert_unloads_from_its_loading_line, _press
+from test_hardening import _assert_loads_along, _assert_unloads_from_its_loading_line, _press
 
 from test_contact_law import frictionless
 
@@ -37,12 +37,10 @@ def test_the_residual_overlap_is_that_of_the_moist_k1():
 
 def test_a_line_steeper_than_k2_is_followed_at_k2():
     law = _wet(-0.2, 20.0)  # k1 e^2.4 = 11 k1 > k2 = 4 k1
-    rows = _press(law, steps=1000)
-    np.testing.assert_allclose(rows[:, 1], law.k2 * rows[:, 0], rtol=1e-9)
+    _assert_loads_along(law, law.k2, steps=1000)
 
 
 @pytest.mark.parametrize("law", [_wet(0.0, 20.0), _wet(0.05, 8.0)])
 def test_off_or_at_the_reference_moisture_it_is_the_paper_line(law):
-    rows = _press(law, steps=500)
-    np.testing.assert_allclose(rows[:, 1], law.k1 * rows[:, 0], rtol=1e-12)
+    _assert_loads_along(law, law.k1, steps=500, rtol=1e-12)
     assert law.to_core().moisture_acts() == (law.moisture_yield != 0.0)

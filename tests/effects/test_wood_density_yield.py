@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 import pytest
-from test_hardening import _assert_unloads_from_its_loading_line, _press
+from test_hardening import _assert_loads_along, _assert_unloads_from_its_loading_line, _press
 
 from test_contact_law import frictionless
 
@@ -47,11 +47,9 @@ def test_it_multiplies_with_the_moisture_factor():
 
 def test_a_line_steeper_than_k2_is_followed_at_k2():
     law = _wood(-6.0, 500.0)  # (500/680)^-6 = 6.3 > k2 / k1 = 4
-    rows = _press(law, steps=1000)
-    np.testing.assert_allclose(rows[:, 1], law.k2 * rows[:, 0], rtol=1e-9)
+    _assert_loads_along(law, law.k2, steps=1000)
 
 
 @pytest.mark.parametrize("law", [_wood(0.0, 510.0), _wood(1.5, 680.0)])
 def test_off_or_at_the_reference_density_it_is_the_paper_line(law):
-    rows = _press(law, steps=500)
-    np.testing.assert_allclose(rows[:, 1], law.k1 * rows[:, 0], rtol=1e-12)
+    _assert_loads_along(law, law.k1, steps=500, rtol=1e-12)
