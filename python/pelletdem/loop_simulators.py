@@ -213,7 +213,6 @@ class FunctionSimulator(Simulator):
         return self._n
 
 
-#: Law rows that each condition sets (the contact law's moisture content is the condition's mc).
 #: Law rows each condition sets: its moisture content, its material's wood density.
 CONDITION_ROWS = {"contact.moisture_content": "moisture content (mc)",
                   "contact.wood_density": "material's particle density (BD_w)"}

@@ -67,7 +67,6 @@ class Targets:
             raise ValueError(f"mc_percent = {self.mc_percent!r} is out of range: allowed 0..100 %")
         if self.wood_density is not None:
             check_positive("wood_density", self.wood_density, "kg/m^3")
-
         for name in ("sigma_f", "dLf_D", "bulk_density"):
             v = getattr(self, name)
             if v is not None:

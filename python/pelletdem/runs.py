@@ -256,7 +256,7 @@ def make_spec(params: Optional[Mapping[str, float]] = None, *, preset="tiny", si
         parameter_unit(name)  # a known name
     rows = {n[len("contact."):]: params.pop(n) for n in list(params) if n.startswith("contact.")}
     p = as_preset(preset)
-    contact = {**dict(contact or {}), **{k: float(v) for k, v in rows.items()}}
+    contact = {**dict(contact or {}), **rows}
     if contact:
         check_names(contact, {f.name: f for f in dataclasses.fields(p.contact)}, "contact law field")
         p = p.with_(contact=dataclasses.replace(p.contact, **contact))
