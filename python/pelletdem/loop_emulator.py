@@ -142,12 +142,15 @@ class Emulator:
     (n, m) their standard errors (from the packings' spread). Rows with a NaN (a failed
     simulation) are left out per output. ``warm``: an emulator of the same outputs on fewer
     points (the design before a refinement), whose hyperparameters start this one's.
+    ``active``: per output, the axes it depends on (None: all): an output of one material
+    does not move with another material's bonds, so its process is fitted over its own axes
+    only, and a design that gives every material the same bonds covers each of them.
     :meth:`predict` gives the emulated mean and its
     variance at new positions, in the outputs' units.
     """
 
     def __init__(self, space: Space, U: np.ndarray, Y: np.ndarray, SE: np.ndarray,
-                 warm: Optional["Emulator"] = None):
+                 warm: Optional["Emulator"] = None, active: Optional[Sequence[Sequence[int]]] = None):
         self.space = space
         self.U = np.atleast_2d(np.asarray(U, float))
         self.Y = np.atleast_2d(np.asarray(Y, float))
@@ -155,7 +158,11 @@ class Emulator:
         n, m = self.Y.shape
         if self.U.shape != (n, space.dim) or self.SE.shape != (n, m):
             raise ValueError(f"design {self.U.shape}, outputs {self.Y.shape} and errors {self.SE.shape} disagree")
-        if warm is not None and (warm.n_outputs != m or warm.space.dim != space.dim):
+        every = tuple(range(space.dim))
+        self.active = [every] * m if active is None else [tuple(int(i) for i in a) for a in active]
+        if len(self.active) != m or any(not a or not set(a) <= set(every) for a in self.active):
+            raise ValueError(f"active: one non-empty list of axes (0..{space.dim - 1}) per output ({m}) is needed")
+        if warm is not None and (warm.n_outputs != m or warm.space.dim != space.dim or warm.active != self.active):
             warm = None
         self._gps: List[Optional[_GP]] = []
         self._log: List[bool] = []
@@ -169,7 +176,7 @@ class Emulator:
         from sklearn.gaussian_process.kernels import ConstantKernel as C
 
         ok = np.isfinite(self.Y[:, j]) & np.isfinite(self.SE[:, j])
-        y, se, U = self.Y[ok, j], self.SE[ok, j], self.U[ok]
+        y, se, U = self.Y[ok, j], self.SE[ok, j], self._columns(self.U[ok], j)
         use_log = bool(len(y) and np.all(y > 0))
         self._log.append(use_log)
         if len(y) < 3:
@@ -182,7 +189,7 @@ class Emulator:
             self._gps.append(None)
             self._const.append((float(np.mean(t)), float(np.mean(te ** 2)) + float(np.var(t))))
             return
-        d = self.space.dim
+        d = len(self.active[j])
         if warm is not None:
             # a refinement: start from the hyperparameters the last design found
             kernel, restarts = warm.kernel, 0
@@ -197,6 +204,11 @@ class Emulator:
             gp.fit(U, t)
         self._gps.append(_GP(gp))
         self._const.append(None)
+
+    def _columns(self, U: np.ndarray, j: int) -> np.ndarray:
+        # all axes: U itself, not a copy, whose other memory layout would change the last bits
+        a = self.active[j]
+        return U if len(a) == self.space.dim else U[:, list(a)]
 
     @property
     def n_outputs(self) -> int:
@@ -214,7 +226,7 @@ class Emulator:
                 mu, v = self._const[j]
                 mu, v = np.full(p, mu), np.full(p, v)
             else:
-                mu, v = gp.predict(U)
+                mu, v = gp.predict(self._columns(U, j))
             if self._log[j]:
                 e = np.exp(mu)
                 mean[:, j], var[:, j] = e, e * e * v

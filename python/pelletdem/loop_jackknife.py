@@ -54,7 +54,7 @@ def packing_jackknife(emulator: Emulator, members: np.ndarray, data: Dataset, u:
         Y = np.mean(rest, axis=1)
         SE = np.std(rest, axis=1, ddof=1) / math.sqrt(k - 1)
         try:
-            emu = Emulator(emulator.space, emulator.U, Y, SE, warm=emulator)
+            emu = Emulator(emulator.space, emulator.U, Y, SE, warm=emulator, active=emulator.active)
         except ValueError:
             return None
         us.append(fit_emulated(emu, data, u, starts=0).u)

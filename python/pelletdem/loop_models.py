@@ -25,7 +25,7 @@ from .loop_noise import PackingNoise
 from .loop_simulators import Ensemble, Simulator
 
 __all__ = ["ModelFit", "REFINE_ROUNDS", "SETTLED", "design_size", "relaxing_axes", "share_relaxations",
-           "simulate_design", "local_design", "fit_model",
+           "material_of", "active_axes", "effective_dim", "tied_design", "simulate_design", "local_design", "fit_model",
            "nested_points", "ensemble_z", "emulator_correlation", "chi2_of", "with_more_check_packings"]
 
 
@@ -50,6 +50,35 @@ NOISE_RADIUS = 0.1
 def design_size(dim: int) -> int:
     """Design points for a box of ``dim`` parameters: 6 per dimension, at least 12."""
     return max(12, 6 * dim)
+
+
+def material_of(name: str) -> str:
+    """The material whose conditions a parameter ``root[material]`` acts on ('' for a shared one)."""
+    _, bracket, rest = name.partition("[")
+    return rest[:-1] if bracket and rest.endswith("]") else ""
+
+
+def active_axes(space: Space, data: Dataset) -> List[Tuple[int, ...]]:
+    """Per observation of ``data``, the axes of ``space`` its prediction moves with: the shared
+    ones and its condition's material's own (``E_b[oak]`` moves no pine pellet)."""
+    return [tuple(i for i, a in enumerate(space.axes) if material_of(a.name) in ("", o.condition.material))
+            for o in data.observations]
+
+
+def effective_dim(space: Space) -> int:
+    """The most axes one condition's predictions move with: the shared ones and one material's."""
+    mats = {material_of(a.name) for a in space.axes} - {""}
+    return max(sum(material_of(a.name) in ("", m) for a in space.axes) for m in (mats or {""}))
+
+
+def tied_design(space: Space, n: int, seed: int = 0) -> np.ndarray:
+    """A Sobol design of ``n`` points (unit box) on which every material's copy of a parameter
+    (``E_b[oak]``, ``E_b[pine]``) takes the same value: each material's axes, with the shared
+    ones, are covered as one material's box alone would be, at the cost of its dimension, not
+    of all materials' (each output's emulator sees only its own axes, :func:`active_axes`)."""
+    keys = [a.name.partition("[")[0] if material_of(a.name) else a.name for a in space.axes]
+    roots = list(dict.fromkeys(keys))
+    return design(len(roots), n, seed)[:, [roots.index(k) for k in keys]]
 
 
 def relaxing_axes(sim: Simulator, space: Space, conditions: Sequence[Condition]) -> Tuple[int, ...]:
@@ -161,11 +190,12 @@ def simulate_design(sim: Simulator, space: Space, data: Dataset, seeds: Sequence
     """(U, Y, SE, V): the design positions of ``space`` (default its Sobol design of ``n``
     points, its points paired on the ``relaxing`` axes, :func:`share_relaxations`), the
     ensemble means and standard errors of every observation of ``data`` there, simulated on
-    ``seeds``, and each packing's own prediction, V[point, packing, observation]. ``errors``:
+    ``seeds``, and each packing's own prediction, V[point, packing, observation]; the default
+    design gives every material the same bonds (:func:`tied_design`). ``errors``:
     a list that gets, per point whose simulation failed, its parameters and the engine's
     message."""
     if U is None:
-        U = share_relaxations(design(space.dim, n or design_size(space.dim)), relaxing)
+        U = share_relaxations(tied_design(space, n or design_size(effective_dim(space))), relaxing)
     conds = data.conditions
     preds = sim.predict_many([space.params(u) for u in U], conds, tuple(seeds))
     Y = np.empty((len(U), len(data)))
@@ -190,13 +220,13 @@ def local_design(space: Space, u: np.ndarray, half_width: float, n: int, seed: i
     return np.vstack([u[None, :], share_relaxations(pts[:n], relaxing)])
 
 
-def _emulate(space: Space, U, Y, SE, name: str, warm: Optional[Emulator] = None,
+def _emulate(space: Space, U, Y, SE, name: str, data: Dataset, warm: Optional[Emulator] = None,
              errors: Sequence[str] = ()) -> Emulator:
     ok = np.all(np.isfinite(Y), axis=1)
     if not ok.any():
         raise RuntimeError(f"{name}: every design point's simulation failed"
                            + (f" (the first: {errors[0]})" if errors else ""))
-    return Emulator(space, U[ok], Y[ok], SE[ok], warm)
+    return Emulator(space, U[ok], Y[ok], SE[ok], warm, active=active_axes(space, data))
 
 
 def fit_model(sim: Simulator, space: Space, effects: Sequence[str], fit_data: Dataset,
@@ -218,7 +248,7 @@ def fit_model(sim: Simulator, space: Space, effects: Sequence[str], fit_data: Da
     design (after the refinement, near the fit); a candidate takes its baseline's, so the
     two models' errors allow for the same correlation."""
     name = " + ".join(("baseline",) + tuple(effects))
-    n_new = design_size(space.dim) if n_design is None else n_design
+    n_new = design_size(effective_dim(space)) if n_design is None else n_design
     log(f"{name}: simulating {n_new} design points on {len(fit_seeds)} packings x "
         f"{len(fit_data.conditions)} conditions")
     relaxing = relaxing_axes(sim, space, fit_data.conditions)
@@ -232,20 +262,20 @@ def fit_model(sim: Simulator, space: Space, effects: Sequence[str], fit_data: Da
     if shared is not None:
         U, Y, SE = np.vstack([U, shared[0]]), np.vstack([Y, shared[1]]), np.vstack([SE, shared[2]])
         rows.append(shared[3] if len(shared) > 3 and shared[3] is not None else None)
-    emu = _emulate(space, U, Y, SE, name, errors=errors)
+    emu = _emulate(space, U, Y, SE, name, fit_data, errors=errors)
     fit = fit_emulated(emu, fit_data, space.unit(start) if start else None,
                        corr=emulator_correlation(noise, emu, fit_data, k))
     for attempt in range(2):
         moved = math.nan
         for r in range(refine):
-            Ul = local_design(space, fit.u, 0.15 / 2 ** r, 2 * space.dim + 2, seed=attempt * refine + r + 1,
+            Ul = local_design(space, fit.u, 0.15 / 2 ** r, 2 * effective_dim(space) + 2, seed=attempt * refine + r + 1,
                               relaxing=relaxing)
             _, Yl, SEl, Vl = simulate_design(sim, space, fit_data, fit_seeds, U=Ul, errors=errors)
             UV.append(Ul)
             VV.append(Vl)
             rows.append(Vl)
             U, Y, SE = np.vstack([U, Ul]), np.vstack([Y, Yl]), np.vstack([SE, SEl])
-            emu = _emulate(space, U, Y, SE, name, emu, errors)
+            emu = _emulate(space, U, Y, SE, name, fit_data, emu, errors)
             new = fit_emulated(emu, fit_data, fit.u, corr=emulator_correlation(noise, emu, fit_data, k))
             moved = float(np.max(np.abs(new.u - fit.u)))
             log(f"{name}: refinement {r + 1} ({len(U)} points), the fit moved {moved:.3f} of the box")

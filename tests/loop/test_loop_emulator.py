@@ -97,3 +97,26 @@ def test_fast_prediction_is_scikit_learns_latent_prediction():
         white = fast.kernel.k2.noise_level * gp._y_train_std ** 2
         assert gp_mean == pytest.approx(mu, rel=1e-8, abs=1e-10)
         assert gp_var == pytest.approx(np.maximum(sd ** 2 - white, 0), rel=1e-6, abs=1e-12)
+
+
+def test_an_output_emulated_over_its_own_axes_is_right_off_the_design_diagonal():
+    """Two outputs, each moving with one axis (one material's bond each): a design on the
+    diagonal u0 = u1 covers each output's own axis, and an emulator fitted over its own axes
+    predicts them anywhere in the square; over both axes it cannot tell which one moves it."""
+    space = Space((Axis("E_b[oak]", 0.0, 1.0, log=False), Axis("E_b[pine]", 0.0, 1.0, log=False)))
+    u = design(1, 16)[:, 0]
+    U = np.column_stack([u, u])
+
+    def truth(U):
+        return np.column_stack([np.exp(1.0 + U[:, 0]), 2.0 + np.sin(3.0 * U[:, 1])])
+
+    SE = np.full((len(U), 2), 1e-3)
+    own = Emulator(space, U, truth(U), SE, active=[(0,), (1,)])
+    Ut = np.random.default_rng(1).uniform(0.05, 0.95, (40, 2))
+    err = np.abs(own.predict(Ut)[0] - truth(Ut))
+    assert np.max(err / truth(Ut)) < 0.01
+    both = Emulator(space, U, truth(U), SE)
+    assert np.max(np.abs(both.predict(Ut)[0] - truth(Ut)) / truth(Ut)) > 5 * np.max(err / truth(Ut))
+    for bad in ([(0,)], [(0,), ()], [(0,), (2,)]):
+        with pytest.raises(ValueError, match="active"):
+            Emulator(space, U, truth(U), SE, active=bad)

@@ -124,3 +124,24 @@ def test_a_fit_the_profile_shows_to_be_a_local_minimum_is_fitted_again_from_the_
     assert fit.below_fit("s") <= 1.0
     lo, hi = fit.interval("s")
     assert lo < 0.2 < hi and hi < 0.55  # the interval is the good well's, and holds its fit
+
+
+def test_a_design_gives_every_material_the_same_bonds_and_each_output_its_own_axes():
+    from pelletdem.loop_data import Condition, Dataset, Observation
+    from pelletdem.loop_emulator import Axis, Space, design
+    from pelletdem.loop_models import active_axes, effective_dim, tied_design
+
+    space = Space((Axis("E_b[oak]", 1e8, 1e10), Axis("sigma_c[oak]", 5e6, 5e8), Axis("E_b[pine]", 1e8, 1e10),
+                   Axis("sigma_c[pine]", 5e6, 5e8), Axis("k1", 1e4, 1e5)))
+    U = tied_design(space, 18)
+    assert np.array_equal(U[:, 0], U[:, 2]) and np.array_equal(U[:, 1], U[:, 3])
+    assert np.array_equal(U[:, [0, 1, 4]], design(3, 18))  # each material's box as if alone
+    assert effective_dim(space) == 3
+    oak, pine = Condition(60e6, 8.0, "oak"), Condition(60e6, 8.0, "pine")
+    data = Dataset([Observation(oak, "sigma_f", float("nan"), 1e6, 1e5, 5),
+                    Observation(pine, "sigma_f", float("nan"), 1e6, 1e5, 5)])
+    assert active_axes(space, data) == [(0, 1, 4), (2, 3, 4)]
+    # one material (no per-material names): the plain design, every axis active
+    one = Space((Axis("E_b", 1e8, 1e10), Axis("sigma_c", 5e6, 5e8)))
+    assert np.array_equal(tied_design(one, 12), design(2, 12)) and effective_dim(one) == 2
+    assert active_axes(one, data) == [(0, 1), (0, 1)]
