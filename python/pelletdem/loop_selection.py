@@ -493,7 +493,10 @@ def close_loop(sim: Simulator, data: Dataset, base_bounds: Mapping[str, Sequence
                 continue
             remaining.append(e)
         if not remaining or len(chosen) >= max_effects:
-            steps.append(Step(model, residual, [], [], None, math.nan))
+            # none tried: say so, rather than that no candidate explains the residual
+            capped = not chosen and remaining and not max_effects
+            steps.append(Step(model, residual, [], [], None, math.nan,
+                              note="no candidate was tried (max_effects = 0)" if capped else ""))
             break
         screens = screen(sim, model, remaining, fit_data, fit_seeds)
         k = max(1, sum(1 for s in screens if not s.skipped))

@@ -138,6 +138,8 @@ def test_a_window_shorter_than_the_data_is_widened_before_the_fit():
     assert any("the tests run to dL/D" in line for line in res.log)
     assert not unfailed(res.baseline, res.fit_data)
     assert res.baseline.fit.params["E_b"] == pytest.approx(TRUTH["E_b"], rel=0.2)
+    # asked for no effect, it says it tried none, not that none explains the residual
+    assert res.verdict == "nothing added: no candidate was tried (max_effects = 0)"
 
 
 def test_a_fitted_model_that_does_not_fail_gets_a_wider_window():
