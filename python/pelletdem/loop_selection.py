@@ -62,7 +62,7 @@ from .loop_box import pinned, pinned_list, pinned_note, rebox, widened
 from .loop_check import check_chi2, check_chi2_se, check_rrmse, held_chi2, model_errors, rrmse_rise_se
 from .loop_data import Condition, Dataset
 from .loop_emulator import Axis, Space
-from .loop_models import ModelFit, fit_model, nested_points, with_more_check_packings
+from .loop_models import ModelFit, effective_dim, fit_model, nested_points, with_more_check_packings
 from .loop_screen import Power, Screen, detection_power, screen
 from .loop_separation import separation, statement
 from .loop_simulators import MAX_WINDOW, Simulator, next_window
@@ -437,7 +437,7 @@ def close_loop(sim: Simulator, data: Dataset, base_bounds: Mapping[str, Sequence
 
     def fit(space: Space, effects, start_params=None, shared=None, noise=None) -> ModelFit:
         # a candidate's box shares the baseline's points (its off face): fewer new ones serve
-        n = n_design if n_design is not None or shared is None else max(8, 2 * space.dim + 2)
+        n = n_design if n_design is not None or shared is None else max(8, 2 * effective_dim(space) + 2)
         return fit_model(sim, space, effects, fit_data, heldout, fit_seeds, check_seeds, start_params, n, say,
                          shared=shared, noise=noise)
 
