@@ -17,8 +17,8 @@ import numpy as np
 
 from .metrics import DEFAULT_REL_SD_FLOOR
 
-__all__ = ["QUANTITIES", "DIAMETRAL_PARTS", "DIAMETRAL_GRID", "COMPACTION_SPLIT", "Condition", "Observation",
-           "Dataset", "diametral_part"]
+__all__ = ["split_material", "QUANTITIES", "DIAMETRAL_PARTS", "DIAMETRAL_GRID", "COMPACTION_SPLIT", "Condition",
+           "Observation", "Dataset", "diametral_part"]
 
 #: Observable quantities: name -> (unit, meaning).
 QUANTITIES: Dict[str, Tuple[str, str]] = {
@@ -37,6 +37,13 @@ DIAMETRAL_GRID = (0.25, 0.5, 0.75, 1.0, 1.25, 1.5)
 #: Compaction curves split at this dh/h0 (the paper's model fits only below it).
 COMPACTION_SPLIT = 0.75
 _MPA = 1e6
+
+
+def split_material(name: str) -> Tuple[str, str]:
+    """(root, material) of a parameter name: ``E_b[oak]`` acts on oak's conditions only, as E_b;
+    a name without brackets is shared by every material (material '')."""
+    root, bracket, rest = name.partition("[")
+    return (root, rest.rstrip("]")) if bracket else (name, "")
 
 
 @dataclass(frozen=True)

@@ -17,7 +17,7 @@ from typing import Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from .loop_data import Condition, Dataset
+from .loop_data import Condition, Dataset, split_material
 from .loop_emulator import Emulator, Space, design
 from .loop_fit import EmulatedFit, fit_emulated, profile, welch_z
 from .loop_jackknife import packing_jackknife, with_packing_luck
@@ -25,7 +25,7 @@ from .loop_noise import PackingNoise
 from .loop_simulators import Ensemble, Simulator
 
 __all__ = ["ModelFit", "REFINE_ROUNDS", "SETTLED", "design_size", "relaxing_axes", "share_relaxations",
-           "material_of", "active_axes", "effective_dim", "tied_design", "simulate_design", "local_design", "fit_model",
+           "active_axes", "effective_dim", "tied_design", "simulate_design", "local_design", "fit_model",
            "nested_points", "ensemble_z", "emulator_correlation", "chi2_of", "with_more_check_packings"]
 
 
@@ -52,23 +52,17 @@ def design_size(dim: int) -> int:
     return max(12, 6 * dim)
 
 
-def material_of(name: str) -> str:
-    """The material whose conditions a parameter ``root[material]`` acts on ('' for a shared one)."""
-    _, bracket, rest = name.partition("[")
-    return rest[:-1] if bracket and rest.endswith("]") else ""
-
-
 def active_axes(space: Space, data: Dataset) -> List[Tuple[int, ...]]:
     """Per observation of ``data``, the axes of ``space`` its prediction moves with: the shared
     ones and its condition's material's own (``E_b[oak]`` moves no pine pellet)."""
-    return [tuple(i for i, a in enumerate(space.axes) if material_of(a.name) in ("", o.condition.material))
+    return [tuple(i for i, a in enumerate(space.axes) if split_material(a.name)[1] in ("", o.condition.material))
             for o in data.observations]
 
 
 def effective_dim(space: Space) -> int:
     """The most axes one condition's predictions move with: the shared ones and one material's."""
-    mats = {material_of(a.name) for a in space.axes} - {""}
-    return max(sum(material_of(a.name) in ("", m) for a in space.axes) for m in (mats or {""}))
+    mats = {split_material(a.name)[1] for a in space.axes} - {""}
+    return max(sum(split_material(a.name)[1] in ("", m) for a in space.axes) for m in (mats or {""}))
 
 
 def tied_design(space: Space, n: int, seed: int = 0) -> np.ndarray:
@@ -76,7 +70,7 @@ def tied_design(space: Space, n: int, seed: int = 0) -> np.ndarray:
     (``E_b[oak]``, ``E_b[pine]``) takes the same value: each material's axes, with the shared
     ones, are covered as one material's box alone would be, at the cost of its dimension, not
     of all materials' (each output's emulator sees only its own axes, :func:`active_axes`)."""
-    keys = [a.name.partition("[")[0] if material_of(a.name) else a.name for a in space.axes]
+    keys = [split_material(a.name)[0] for a in space.axes]
     roots = list(dict.fromkeys(keys))
     return design(len(roots), n, seed)[:, [roots.index(k) for k in keys]]
 

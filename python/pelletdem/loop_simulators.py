@@ -25,7 +25,7 @@ import numpy as np
 
 from .engine import BondLaw
 from .execution import Evaluator, open_executor, with_relaxed_dir
-from .loop_data import Condition, Observation
+from .loop_data import Condition, Observation, split_material
 from .run_cache import RunCache
 from .runs import check_names, check_positive, make_spec, run_setup
 from .worker import run_point
@@ -307,8 +307,8 @@ class EngineSimulator(Simulator):
             elif name.startswith("bond."):
                 bond[name[5:]] = v
             elif "[" in name:
-                root, _, group = name.partition("[")
-                if group.rstrip("]") == cond.material:
+                root, group = split_material(name)
+                if group == cond.material:
                     base[root] = v
             else:
                 base[name] = v
