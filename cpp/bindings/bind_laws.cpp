@@ -50,6 +50,7 @@ void bind_laws(py::module_& m) {
         .def("validate", &ContactLawParams::validate)
         .def("plain_pairs", &ContactLawParams::plain_pairs)
         .def("moisture_acts", &ContactLawParams::moisture_acts)
+        .def("wood_density_acts", &ContactLawParams::wood_density_acts)
         .def_static("rows", &ContactLawParams::rows);
   }
   {

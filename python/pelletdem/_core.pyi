@@ -88,6 +88,8 @@ class ContactLawParams:
         """True while every row the four-lane pair kernel lacks keeps its default."""
     def moisture_acts(self) -> bool:
         """True when an effect on makes compaction depend on moisture_content (%)."""
+    def wood_density_acts(self) -> bool:
+        """True when an effect on makes compaction depend on wood_density (kg/m^3)."""
     @staticmethod
     def rows() -> list[ParamRow]:
         """The law's parameter table."""

@@ -314,9 +314,9 @@ class EngineSimulator(Simulator):
                 base[name] = v
         refuse_condition_rows([*params, *(f"contact.{k}" for k in contact)])
         contact["moisture_content"] = float(cond.mc)
-        if contact.get("wood_density_yield", self.setup.preset.contact.wood_density_yield) != 0.0:
+        if dataclasses.replace(self.setup.preset.contact, **contact).to_core().wood_density_acts():
             if cond.material not in self._density:
-                raise ValueError(f"wood_density_yield acts but material {cond.material!r} has no particle_density: "
+                raise ValueError(f"the wood's density acts (wood_density_yield) but material {cond.material!r} has no particle_density: "
                                  f"give one (kg/m^3) for each of the data's materials")
             contact["wood_density"] = self._density[cond.material]
         for alias, fld in _ALIASES:

@@ -199,7 +199,8 @@ def calibrate_variants(variants=None, preset="tiny", *,
     rows = {n[len("contact."):]: (b[2] if len(b) == 3 else math.sqrt(b[0] * b[1]))
             for n, b in (compaction or {}).items() if n.startswith("contact.")}
     law = dataclasses.replace(p.contact, **{**dict(contact or {}), **rows})
-    by_material, by_mc = law.wood_density_yield != 0.0, law.to_core().moisture_acts()
+    core = law.to_core()
+    by_material, by_mc = core.wood_density_acts(), core.moisture_acts()
     if not isinstance(start, (str, Mapping)) or (isinstance(start, str) and start != "table5"):
         raise ValueError(f"start = {start!r}: pass 'table5' or a mapping {{label: {{name: value}}}}")
     vlog = (lambda *a: print(*a, flush=True)) if verbose else (lambda *a: None)
@@ -228,7 +229,7 @@ def calibrate_variants(variants=None, preset="tiny", *,
         # relaxed_dir (deleted, or a killed sitting) is run again to put it back.
         # Each variant's moisture content is its contact law's, which the moisture effects
         # read; where none acts, wet and dry share one relaxed pellet (one run key). Its wood's
-        # BD_w is the law's wood_density only where wood_density_yield reads it.
+        # BD_w is the law's wood_density only where an effect reads it.
         def group(v):
             return (v.sigma_z, v.mc_percent, v.material if by_material else "")
 

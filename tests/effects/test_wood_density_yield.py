@@ -27,7 +27,8 @@ def test_loading_follows_the_wood_density_line(n, rho, ref):
     fac = (rho / ref) ** n
     assert fac * law.k1 < law.k2
     np.testing.assert_allclose(rows[:, 1], fac * law.k1 * rows[:, 0], rtol=1e-9)
-    assert law.to_core().plain_pairs() and not law.to_core().moisture_acts()
+    core = law.to_core()
+    assert core.plain_pairs() and not core.moisture_acts() and core.wood_density_acts()
 
 
 def test_the_residual_overlap_is_that_of_the_wood_k1():
@@ -53,3 +54,5 @@ def test_a_line_steeper_than_k2_is_followed_at_k2():
 @pytest.mark.parametrize("law", [_wood(0.0, 510.0), _wood(1.5, 680.0)])
 def test_off_or_at_the_reference_density_it_is_the_paper_line(law):
     _assert_loads_along(law, law.k1, steps=500, rtol=1e-12)
+    # off, the wood's density is not read: the woods share their relaxed pellets
+    assert law.to_core().wood_density_acts() == (law.wood_density_yield != 0.0)

@@ -76,6 +76,9 @@ struct ContactLawParams {
   // True when an effect on makes compaction depend on the moisture content (the relaxed
   // pellet then differs between moisture contents).
   bool moisture_acts() const { return ContactEffects::reads_moisture(*this); }
+  // True when an effect on makes compaction depend on the wood's density (each material then
+  // relaxes its own pellet).
+  bool wood_density_acts() const { return ContactEffects::reads_wood_density(*this); }
   // True when every effect's row keeps its default: the law is the paper's.
   bool effects_off() const { return true PELLETDEM_CONTACT_EFFECT_ROWS(PELLETDEM_PARAM_AT_DEFAULT); }
   static std::vector<ParamRow> rows() { return {PELLETDEM_CONTACT_ALL_ROWS(PELLETDEM_PARAM_ROW)}; }

@@ -54,6 +54,11 @@ struct ContactEffect {
   static bool reads_moisture(const P&) {
     return false;
   }
+  // True when the effect, as set, reads the intact wood's density (wood_density).
+  template <class P>
+  static bool reads_wood_density(const P&) {
+    return false;
+  }
   // Largest loading force (N) of a wall contact of a particle of radius r (m), given the cap
   // so far; `crushable`: the wall is one of the diametral plates (Wall::crushable).
   template <class P>
@@ -113,6 +118,10 @@ struct EffectList {
   template <class P>
   static bool reads_moisture(const P& p) {
     return (false || ... || E::reads_moisture(p));
+  }
+  template <class P>
+  static bool reads_wood_density(const P& p) {
+    return (false || ... || E::reads_wood_density(p));
   }
   template <class P>
   static double unloading_stiffness(const P& p, double k2, double delta0, double r_eff) {

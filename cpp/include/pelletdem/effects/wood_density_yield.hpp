@@ -24,6 +24,10 @@
 namespace pelletdem {
 
 struct WoodDensityYield : ContactEffect {
+  template <class P>
+  static bool reads_wood_density(const P& p) {
+    return p.wood_density_yield != 0.0;
+  }
   // A factor on k1, made once per law, like moisture_yield's.
   template <class P>
   static double loading_stiffness_factor(const P& p) {
