@@ -15,9 +15,11 @@ import subprocess
 import sys
 import types
 
+import numpy as np
 import pytest
 
 from pelletdem import calibration_dir, cli
+from pelletdem.variants import calibrate_variants
 from test_calibrate import CALLS, power_law_runner
 
 FILES = ["calibration.csv", "calibration.json", "fig15_measured_vs_simulated.png", "fig15_curves.png",
@@ -85,6 +87,8 @@ def _main(argv):
     (["--fit", "contact.moisture_content=5:20"], "contact.moisture_content", "each condition's moisture"),
     (["--fit", "contact.wood_density_yield=0.3:4", "--compaction-runs", "0"], "--fit", "--compaction-runs 1"),
     (["--fit", "contact.wood_density_yield=0.3:4", "--data", "example"], "--fit", "manifest"),
+    (["--per-material", "--compaction-runs", "0"], "--per-material", "--compaction-runs 1"),
+    (["--per-material", "--data", "example"], "--per-material", "manifest"),
 ])
 def test_bad_arguments_exit_2_naming_the_argument_before_any_work(extra, name, allowed, no_calibration, capsys,
                                                                   tmp_path):
@@ -173,7 +177,7 @@ def test_calibrate_help_lists_every_option(capsys):
     assert _main(["calibrate", "--help"]) == 0
     text = capsys.readouterr().out
     for opt in ("OUT_DIR", "--preset", "--variant", "--max-runs", "--compaction-runs", "--from", "--workers",
-                "--dask", "--set"):
+                "--dask", "--set", "--fit", "--per-material", "--packings", "--data"):
         assert opt in text, opt
 
 
@@ -305,6 +309,56 @@ def test_each_wood_relaxes_its_own_pellets_where_its_density_acts(tmp_path):
     with pytest.raises(ValueError, match="compaction"):
         calibration_dir.calibrate_into(tmp_path / "bad", two, "tiny", compaction_runs=0,
                                        fit={"contact.wood_density_yield": (0.3, 4.0)}, runner=runner)
+
+
+def test_k1_per_material_is_fitted_on_each_woods_own_densities(tmp_path):
+    """--per-material: one compaction fit per wood, on its own Table 2 densities. Each wood's
+    runs take its own k1 (and relax their own pellets), the denser-compacting wood gets the
+    softer k1, each wood's densities are met at least as well as with one k1 for both, and a
+    later calibration --from it keeps each wood's k1."""
+    two = [("oak", 8, 60), ("oak", 8, 120), ("pine", 8, 60), ("pine", 8, 120)]
+    seen = []
+
+    def runner(spec):
+        seen.append((spec.kind, spec.preset.contact.k1))
+        return power_law_runner(spec)
+
+    kw = dict(max_runs=1, compaction_runs=6, executor="serial", runner=runner, log=lambda s: None)
+    shared = calibration_dir.calibrate_into(tmp_path / "shared", two, "tiny", **kw)
+    seen.clear()
+    rep = calibration_dir.calibrate_into(tmp_path / "own", two, "tiny", per_material=True, **kw)
+    assert rep.compaction is None and set(rep.compaction_by_material) == {"oak", "pine"}
+    k1 = {m: law["k1"] for m, law in rep.contact_by_material.items()}
+    assert k1["pine"] < k1["oak"]  # pine's pellets are denser against its BD_w (Table 2)
+    assert all(law["k2"] == pytest.approx(4 * law["k1"]) for law in rep.contact_by_material.values())
+    t = rep.table
+    assert dict(zip(t["material"], t["k1"])) == k1
+    assert {k for kind, k in seen if kind == "diametral"} == set(k1.values())
+    for m in k1:
+        own, one = (float(np.sum(r.table[r.table["material"] == m]["z_bd"] ** 2)) for r in (rep, shared))
+        assert own <= one + 1e-9
+    saved = json.loads((tmp_path / "own" / "calibration.json").read_text())
+    assert saved["per_material"] and saved["contact_by_material"] == rep.contact_by_material
+    assert "compaction fit of oak" in str(rep) and "compaction fit of pine" in str(rep)
+    seen.clear()
+    again = calibration_dir.calibrate_into(tmp_path / "again", two, "tiny", max_runs=1, source=tmp_path / "own",
+                                           executor="serial", runner=runner, log=lambda s: None)
+    assert dict(zip(again.table["material"], again.table["k1"])) == k1
+    assert {k for _, k in seen} == set(k1.values())
+    with pytest.raises(ValueError, match="per_material"):
+        calibration_dir.calibrate_into(tmp_path / "bad", two, "tiny", per_material=True, compaction_runs=0,
+                                       runner=runner)
+    with pytest.raises(ValueError, match="'teak'"):
+        calibrate_variants(two, "tiny", compaction=None, contact_by_material={"teak": {"k1": 3e4}},
+                                           runner=runner)
+    with pytest.raises(ValueError, match="pass one"):
+        calibrate_variants(two, "tiny", contact_by_material={"oak": {"k1": 3e4}}, runner=runner)
+    with pytest.raises(ValueError, match="k1"):
+        calibrate_variants(two, "tiny", compaction=None, contact_by_material={"oak": {"k1": -1.0}},
+                                           runner=runner)
+    with pytest.raises(ValueError, match="moisture_content"):
+        calibrate_variants(two, "tiny", compaction=None,
+                                           contact_by_material={"oak": {"moisture_content": 12.0}}, runner=runner)
 
 
 def test_calibrate_into_from_an_earlier_calibration(tmp_path):

@@ -75,6 +75,9 @@ def add_arguments(p: argparse.ArgumentParser, *, preset: str = "tiny", max_runs:
                    help="fit this contact-law row too, beside k1 in the shared compaction fit (a positive "
                         "strength, in log space; starts at its --set value), e.g. "
                         "contact.wood_density_yield=0.3:4 (repeatable)")
+    p.add_argument("--per-material", action="store_true",
+                   help="fit k1 (and the --fit rows) per material, each on its own wood's densities: the "
+                        "yield a material parameter, as the bonds are per variant (default: one for all)")
     p.add_argument("--set", action="append", default=[], metavar="LAW.NAME=VALUE",
                    help="set a contact or bond law parameter, e.g. contact.mu=0.4 (SI units; repeatable; "
                         "not the fitted bond.youngs_modulus, bond.sigma_c, bond.tau_c)")
@@ -174,8 +177,12 @@ def check(args) -> dict:
     fit_rows = parse_fit(args.fit, settings, args.compaction_runs)
     if fit_rows and args.source is not None:
         raise ValueError("--fit with --from: the contact law comes from that calibration, no compaction fit runs")
+    if args.per_material and (args.source is not None or not args.compaction_runs):
+        raise ValueError("--per-material fits k1 per material: it needs the compaction fit "
+                         "(--compaction-runs 1 or more, no --from)")
     if args.data is not None:
-        for flag, given in (("--variant", args.variant), ("--from", args.source), ("--fit", args.fit)):
+        for flag, given in (("--variant", args.variant), ("--from", args.source), ("--fit", args.fit),
+                            ("--per-material", args.per_material)):
             if given:
                 raise ValueError(f"{flag} is for the paper's variants; with --data the manifest says what is fitted")
         if args.packings is not None and not 2 <= args.packings <= 64:
@@ -194,12 +201,15 @@ def check(args) -> dict:
             src = load_calibration(args.source)
         except ValueError as e:
             raise ValueError(f"--from {e}") from None
-        fixed = sorted(f"contact.{k}" for k in src["contact"] if f"contact.{k}" in settings)
+        laws = [src["contact"]] + [{**src["contact"], **rows} for rows in (src.get("contact_by_material") or {}).values()]
+        given = sorted({k for law in laws for k in law})
+        fixed = [f"contact.{k}" for k in given if f"contact.{k}" in settings]
         if fixed:
             raise ValueError(f"--set {', '.join(fixed)} with --from {args.source}: the contact law's "
-                             f"{', '.join(src['contact'])} come from that calibration")
+                             f"{', '.join(given)} come from that calibration")
         try:
-            make_spec({}, preset=preset.with_(contact=contact), diametral=False, contact=src["contact"])
+            for law in laws:
+                make_spec({}, preset=preset.with_(contact=contact), diametral=False, contact=law)
         except (ValueError, TypeError) as e:
             raise ValueError(f"--from {args.source}: its contact law is refused: {e}") from None
     if args.dask is not None:
@@ -210,7 +220,7 @@ def check(args) -> dict:
                              "pip install distributed")
     return dict(variants=variants, preset=args.preset or args.preset_default, max_runs=args.max_runs,
                 compaction_runs=args.compaction_runs, packings=args.packings or 1, source=args.source,
-                settings=settings, fit=fit_rows, max_workers=args.workers)
+                settings=settings, fit=fit_rows, per_material=args.per_material, max_workers=args.workers)
 
 
 def run(args) -> int:

@@ -86,6 +86,9 @@ def load_calibration(directory: Union[str, os.PathLike]) -> dict:
     if not (isinstance(source, dict) and isinstance(source.get("contact"), dict)
             and isinstance(source.get("bond_start"), dict)):
         raise ValueError(f"{path}: not a calibration (no 'contact' and 'bond_start' mappings)")
+    by_material = source.get("contact_by_material") or {}
+    if not (isinstance(by_material, dict) and all(isinstance(r, dict) for r in by_material.values())):
+        raise ValueError(f"{path}: contact_by_material = {by_material!r} is not a mapping {{material: {{row: value}}}}")
     for label, params in source["bond_start"].items():
         if not isinstance(params, dict):
             raise ValueError(f"{path}: bond_start[{label!r}] = {params!r} is not a mapping {{name: value}}")
@@ -97,7 +100,7 @@ def load_calibration(directory: Union[str, os.PathLike]) -> dict:
 def calibrate_into(out: Union[str, os.PathLike], variants=None, preset="tiny", *, max_runs: int = 4,
                    compaction_runs: int = 2, packings: int = 1, source: Optional[Union[str, os.PathLike]] = None,
                    settings: Optional[Mapping[str, object]] = None,
-                   fit: Optional[Mapping[str, Sequence[float]]] = None, executor=None,
+                   fit: Optional[Mapping[str, Sequence[float]]] = None, per_material: bool = False, executor=None,
                    max_workers: Optional[int] = None, runner: Callable[[RunSpec], dict] = run_point,
                    log: Callable[[str], None] = print) -> CalibrationReport:
     """Calibrate ``variants`` (default all 12; Variants or (material, mc %, sigma_z MPa) keys)
@@ -114,7 +117,9 @@ def calibrate_into(out: Union[str, os.PathLike], variants=None, preset="tiny", *
     ``settings``: {'contact.X': v, 'bond.Y': w} (SI; :mod:`pelletdem.law_settings`) applied
     to the preset's contact law and the base bond law before fitting. ``fit``:
     {'contact.<field>': (lo, hi) or (lo, hi, start)}: contact-law rows fitted beside k1 in the
-    compaction fit (positive, log space). ``executor``,
+    compaction fit (positive, log space). ``per_material``: that fit runs per material, on its
+    own densities (k1 a material parameter; calibration.json's ``contact_by_material``, which
+    ``source`` passes on). ``executor``,
     ``max_workers``, ``runner``: as in ``calibrate_variants`` (a Dask ``distributed.Client``
     is an executor). ``log``: where the report's text goes. The preset runs with the paper's
     overlap guard (:func:`pelletdem.loop_paper.paper_preset`), as the loop's paper variants
@@ -127,6 +132,8 @@ def calibrate_into(out: Union[str, os.PathLike], variants=None, preset="tiny", *
         raise ValueError(f"packings = {packings!r}: allowed an integer 1..64")
     if fit and (source is not None or not compaction_runs):
         raise ValueError("fit = {...} needs the compaction fit: compaction_runs >= 1 and no source")
+    if per_material and (source is not None or not compaction_runs):
+        raise ValueError("per_material = True needs the compaction fit: compaction_runs >= 1 and no source")
     p = paper_preset(preset)
     settings = dict(settings or {})
     contact, bond = apply_settings(p.contact, BondLaw(), settings)
@@ -134,10 +141,12 @@ def calibrate_into(out: Union[str, os.PathLike], variants=None, preset="tiny", *
     vs = as_variants(variants)
     if source is not None:
         src = load_calibration(source)
-        setup = dict(compaction=None, contact=src["contact"], start=src["bond_start"])
+        setup = dict(compaction=None, contact=src["contact"], start=src["bond_start"],
+                     contact_by_material=src.get("contact_by_material") or None)
     elif compaction_runs:
         k1 = p.contact.k1
-        setup = dict(compaction={"k1": (k1 / 10, k1 * 10, k1), **dict(fit or {})}, compaction_max_runs=compaction_runs)
+        setup = dict(compaction={"k1": (k1 / 10, k1 * 10, k1), **dict(fit or {})}, compaction_max_runs=compaction_runs,
+                     per_material=per_material)
     else:
         setup = dict(compaction=None)
     out = Path(out)
@@ -152,7 +161,7 @@ def calibrate_into(out: Union[str, os.PathLike], variants=None, preset="tiny", *
     (out / CALIBRATION_FILE).write_text(json.dumps({
         "preset": p.name, "variants": [v.label for v in vs], "packings": packings, "set": settings,
         "fit": {k: list(v) for k, v in (fit or {}).items()},
-        "contact": report.contact,
+        "per_material": per_material, "contact": report.contact, "contact_by_material": report.contact_by_material,
         "bond_start": report.bond_start(), "from": os.fspath(source) if source is not None else None,
         "n_simulations": report.n_simulations, "n_cached": report.n_cached,
         "n_relaxations": report.n_relaxations, "wall_time_s": report.wall_time_s, "agreement": report.agreement(),

@@ -19,7 +19,7 @@ import dataclasses
 import math
 import os
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Callable, Dict, Mapping, Optional, Sequence, Union
 
 import numpy as np
@@ -52,8 +52,11 @@ class CalibrationReport:
     the packings, NaN with one) beside Table 2's with its z-score (the laboratory's SD, at least
     1 %, and the model's standard error combined),
     the simulated coordination number beside Table 5's, runs used and convergence.
-    ``compaction``: the shared k1 / p_y fit (:class:`FitResult`, None if skipped) and
-    ``contact``: the contact-law overrides used for the bond fits. ``fits``: label ->
+    ``compaction``: the shared k1 / p_y fit (:class:`FitResult`, None if skipped or per
+    material) and ``contact``: the contact-law overrides used for the bond fits;
+    ``compaction_by_material`` and ``contact_by_material``: {material: ...} of the same, where
+    k1 is a material parameter (``per_material``; empty otherwise), the material's rows on
+    top of ``contact``. The table's ``k1`` (N/m) is each variant's. ``fits``: label ->
     :class:`FitResult`. ``n_simulations``, ``n_cached``, ``n_relaxations``: runs executed, read
     from the cache, relaxations done; ``wall_time_s``: s.
     """
@@ -66,6 +69,8 @@ class CalibrationReport:
     n_cached: int
     n_relaxations: int
     wall_time_s: float
+    compaction_by_material: Dict[str, FitResult] = field(default_factory=dict)
+    contact_by_material: Dict[str, dict] = field(default_factory=dict)
 
     def agreement(self) -> Dict[str, int]:
         """How many variants meet each of the paper-agreement criteria (counts; ``variants``
@@ -99,9 +104,10 @@ class CalibrationReport:
         with pd.option_context("display.width", 200, "display.max_columns", 40):
             head = (f"calibration: {self.n_simulations} simulations run, {self.n_cached} from the cache, "
                     f"{self.n_relaxations} relaxations, {self.wall_time_s:.0f} s\n")
-            if self.compaction is not None:
-                c = self.compaction
-                head += (f"compaction fit: {', '.join(f'{k}={v:.4g}' for k, v in c.params.items())}, "
+            fits = ({"": self.compaction} if self.compaction is not None else {}) | self.compaction_by_material
+            for m, c in fits.items():
+                head += (f"compaction fit{' of ' + m if m else ''}: "
+                         f"{', '.join(f'{k}={v:.4g}' for k, v in c.params.items())}, "
                          f"rms z {c.rms_z:.3g} ({c.message})\n")
             a = self.agreement()
             tail = (f"\nagreement with the paper, of {a['variants']} variants: sigma_f within 1 SD "
@@ -118,7 +124,8 @@ def calibrate_variants(variants=None, preset="tiny", *,
                        start="table5", seeds=(0,), tol: float = 0.5, max_runs: int = 8,
                        compaction_max_runs: int = 6, max_dLD: Optional[float] = None,
                        break_drop: float = 0.7, bond: Optional[BondLaw] = None,
-                       contact: Optional[Mapping[str, float]] = None,
+                       contact: Optional[Mapping[str, float]] = None, per_material: bool = False,
+                       contact_by_material: Optional[Mapping[str, Mapping[str, float]]] = None,
                        cache_dir: Optional[Union[str, os.PathLike]] = None,
                        executor=None, max_workers: Optional[int] = None,
                        runner: Callable[[RunSpec], dict] = run_point,
@@ -138,6 +145,10 @@ def calibrate_variants(variants=None, preset="tiny", *,
        its moisture content; where the yield depends on the wood's density
        (``wood_density_yield``), so is each material, run at its BD_w. The paper fitted p_y
        to the compaction curves instead; Table 2 is what ships with the package.
+       ``per_material``: the fit runs once per material (concurrently), on that material's
+       densities alone, so k1 and the rows fitted with it are material parameters, as the
+       bonds are per variant: the woods' yield differs by species in a way their BD_w does
+       not order (birch, nearly as light as pine, compacts like oak).
     2. Per variant, with that contact law: fit ``bond_params`` (default E_b in [1e5, 1e10] Pa,
        sigma_c in [1e4, 1e10] Pa, tau_c = sigma_c) against Table 3's sigma_f and dL_f/D with
        :func:`fit` (scaling method, ``tol``, ``max_runs`` points), starting from ``start``:
@@ -162,7 +173,9 @@ def calibrate_variants(variants=None, preset="tiny", *,
     a ``compaction`` mapping): e.g. ``report.contact`` of a calibration on a smaller preset of the
     same radii, whose pellets' densities under a pressure should be close to the larger ones'
     (the table's ``bd_sim`` shows how close); pass ``start=report.bond_start()`` as well to
-    begin the bond fits where the smaller preset's ended.
+    begin the bond fits where the smaller preset's ended. ``contact_by_material``: {material:
+    ContactLaw field overrides} on top of ``contact`` for that material's variants (a
+    per-material calibration's ``report.contact_by_material``), likewise in place of step 1.
 
     ``seeds``: packing seeds averaged per point. ``cache_dir``, ``executor``, ``max_workers``,
     ``runner``, ``relaxed_dir``: as in :func:`scan`. ``verbose``: print every point.
@@ -190,9 +203,22 @@ def calibrate_variants(variants=None, preset="tiny", *,
             raise ValueError(f"contact = {contact!r}: pass a mapping of ContactLaw fields, "
                              "e.g. {'k1': 4e4, 'k2': 1.6e5}")
         make_spec({}, preset=p, diametral=False, contact=contact)  # names and values checked
+    if not isinstance(per_material, bool):
+        raise ValueError(f"per_material = {per_material!r}: pass True or False")
+    if per_material and compaction is None:
+        raise ValueError("per_material = True fits the compaction per material: it needs compaction = {...}")
+    contact_by_material = {m: dict(rows) for m, rows in (contact_by_material or {}).items()}
+    if contact_by_material and compaction is not None:
+        raise ValueError("contact_by_material = {...} fixes the contact law; compaction = {...} fits it: pass one")
+    for m, rows in contact_by_material.items():
+        if m not in {v.material for v in vs}:
+            raise ValueError(f"contact_by_material: material {m!r} is not among the variants' "
+                             f"({', '.join(sorted({v.material for v in vs}))})")
+        make_spec({}, preset=p, diametral=False, contact={**dict(contact or {}), **rows})
     # each variant's own MC replaces the law's: one set elsewhere would be silently dropped
     for row, what in (("moisture_content", "moisture content"), ("wood_density", "wood's BD_w (Table 2)")):
-        if row in (contact or {}) or getattr(p.contact, row) != getattr(type(p.contact)(), row):
+        if (row in (contact or {}) or any(row in rows for rows in contact_by_material.values())
+                or getattr(p.contact, row) != getattr(type(p.contact)(), row)):
             raise ValueError(f"contact.{row} is set by each variant's {what}: do not set it")
     # the law as the fit starts it: where its yield depends on the wood's density, each material
     # relaxes its own pellets; where a moisture effect acts, each moisture content
@@ -200,7 +226,8 @@ def calibrate_variants(variants=None, preset="tiny", *,
             for n, b in (compaction or {}).items() if n.startswith("contact.")}
     law = dataclasses.replace(p.contact, **{**dict(contact or {}), **rows})
     core = law.to_core()
-    by_material, by_mc = core.wood_density_acts(), core.moisture_acts()
+    wood_acts, by_mc = core.wood_density_acts(), core.moisture_acts()
+    by_material = wood_acts or per_material or bool(contact_by_material)
     if not isinstance(start, (str, Mapping)) or (isinstance(start, str) and start != "table5"):
         raise ValueError(f"start = {start!r}: pass 'table5' or a mapping {{label: {{name: value}}}}")
     vlog = (lambda *a: print(*a, flush=True)) if verbose else (lambda *a: None)
@@ -209,17 +236,30 @@ def calibrate_variants(variants=None, preset="tiny", *,
         ev = Evaluator(RunCache(cache_dir), ex, with_relaxed_dir(runner, relaxed_dir),
                        relaxed_shared=relaxed_dir is not None)
         contact = dict(contact or {})
-        comp_fit = None
+        comp_fits = {}
         if compaction is not None:
-            vlog("[calibrate] compaction fit")
-            # wet and dry pellets (and each wood, where its density acts) are asked their own
-            targets = compaction_targets(vs, compaction_state, p.density, by_mc=by_mc, by_material=by_material)
-            comp_fit = fit(compaction, targets, preset=p, seeds=seeds,
+            vlog("[calibrate] compaction fit" + (" per material" if per_material else ""))
+            subsets = ({m: [v for v in vs if v.material == m] for m in sorted({v.material for v in vs})}
+                       if per_material else {"": vs})
+
+            def fit_compaction(sub):
+                # wet and dry pellets (and each wood, where its density acts) are asked their own
+                targets = compaction_targets(sub, compaction_state, p.density, by_mc=by_mc, by_material=wood_acts)
+                return fit(compaction, targets, preset=p, seeds=seeds,
                            tol=tol, max_runs=compaction_max_runs, evaluator=ev, verbose=verbose)
-            fitted = dict(comp_fit.params)
-            k1 = fitted.pop("k1") if "k1" in fitted else k1_from_yield_strength(fitted.pop("p_y"), p.radius_mean)
-            contact = {"k1": k1, "k2": k1 * p.contact.k2 / p.contact.k1,
-                       **{n[len("contact."):]: v for n, v in fitted.items()}}
+
+            with cf.ThreadPoolExecutor(max_workers=len(subsets), thread_name_prefix="compaction") as drivers:
+                comp_fits = dict(zip(subsets, drivers.map(fit_compaction, subsets.values())))
+            laws = {}
+            for m, f in comp_fits.items():
+                fitted = dict(f.params)
+                k1 = fitted.pop("k1") if "k1" in fitted else k1_from_yield_strength(fitted.pop("p_y"), p.radius_mean)
+                laws[m] = {"k1": k1, "k2": k1 * p.contact.k2 / p.contact.k1,
+                           **{n[len("contact."):]: v for n, v in fitted.items()}}
+            if per_material:
+                contact_by_material = laws
+            else:
+                contact = laws[""]
 
         # Densities of every variant's pressure under the shared contact law, first: these
         # runs relax one pellet per pressure and seed, all at once on the workers, and each
@@ -229,7 +269,8 @@ def calibrate_variants(variants=None, preset="tiny", *,
         # relaxed_dir (deleted, or a killed sitting) is run again to put it back.
         # Each variant's moisture content is its contact law's, which the moisture effects
         # read; where none acts, wet and dry share one relaxed pellet (one run key). Its wood's
-        # BD_w is the law's wood_density only where an effect reads it.
+        # BD_w is the law's wood_density only where an effect reads it; with k1 per material
+        # each wood relaxes its own pellets.
         def group(v):
             return (v.sigma_z, v.mc_percent, v.material if by_material else "")
 
@@ -241,8 +282,8 @@ def calibrate_variants(variants=None, preset="tiny", *,
             return keep and not os.path.exists(relaxed_path(relaxed_dir, spec.relax_key))
 
         def contact_at(mc, material=""):
-            return {**contact, "moisture_content": float(mc),
-                    **({"wood_density": float(wood[material])} if material else {})}
+            return {**contact, **contact_by_material.get(material, {}), "moisture_content": float(mc),
+                    **({"wood_density": float(wood[material])} if material and wood_acts else {})}
 
         submitted = {}
 
@@ -310,6 +351,7 @@ def calibrate_variants(variants=None, preset="tiny", *,
         sc = f.scores[0] if f.scores else {}
         rows.append({
             "material": v.material, "mc_percent": v.mc_percent, "sigma_z_mpa": v.sigma_z_mpa,
+            "k1": float(contact_at(*at[1:]).get("k1", p.contact.k1)),
             "E_b_mpa": f.params.get("E_b", float("nan")) / _MPA, "E_b_mpa_paper": v.e_b / _MPA,
             "sigma_c_mpa": f.params.get("sigma_c", float("nan")) / _MPA, "sigma_c_mpa_paper": v.sigma_c / _MPA,
             "sigma_f_mpa_sim": outs.get("sigma_f", float("nan")) / _MPA, "sigma_f_mpa_exp": v.sigma_f / _MPA,
@@ -323,6 +365,8 @@ def calibrate_variants(variants=None, preset="tiny", *,
             "n_points": f.n_points, "converged": f.converged,
         })
     table = pd.DataFrame(rows)
-    return CalibrationReport(table=table, compaction=comp_fit, contact=contact, fits=fits,
+    return CalibrationReport(table=table, compaction=comp_fits.get(""), contact=contact, fits=fits,
+                             compaction_by_material=comp_fits if per_material else {},
+                             contact_by_material=contact_by_material,
                              n_simulations=stats["n_simulations"], n_cached=stats["n_cached"],
                              n_relaxations=stats["n_relaxations"], wall_time_s=time.perf_counter() - t0)
