@@ -201,7 +201,8 @@ def check(args) -> dict:
             src = load_calibration(args.source)
         except ValueError as e:
             raise ValueError(f"--from {e}") from None
-        laws = [src["contact"]] + [{**src["contact"], **rows} for rows in (src.get("contact_by_material") or {}).values()]
+        by_material = (src.get("contact_by_material") or {}).values()
+        laws = [src["contact"]] + [{**src["contact"], **rows} for rows in by_material]
         given = sorted({k for law in laws for k in law})
         fixed = [f"contact.{k}" for k in given if f"contact.{k}" in settings]
         if fixed:

@@ -316,8 +316,8 @@ class EngineSimulator(Simulator):
         contact["moisture_content"] = float(cond.mc)
         if dataclasses.replace(self.setup.preset.contact, **contact).to_core().wood_density_acts():
             if cond.material not in self._density:
-                raise ValueError(f"the wood's density acts (wood_density_yield) but material {cond.material!r} has no particle_density: "
-                                 f"give one (kg/m^3) for each of the data's materials")
+                raise ValueError(f"the wood's density acts (wood_density_yield) but material {cond.material!r} "
+                                 f"has no particle_density: give one (kg/m^3) for each of the data's materials")
             contact["wood_density"] = self._density[cond.material]
         for alias, fld in _ALIASES:
             if alias in base and fld in (contact if fld in ("k1",) else bond):
