@@ -631,3 +631,31 @@ def test_a_contact_rows_strength_is_fitted_beside_k1():
         C.make_spec({"contact.no_such_row": 1.0})
     with pytest.raises(ValueError, match="contact.wood_density_yield"):
         C.fit({"contact.wood_density_yield": (-1.0, 2.0)}, targets, runner=runner)
+
+
+def test_a_negative_strength_is_fitted_in_log_space_of_its_magnitude():
+    """moisture_yield's c < 0 (wetter pellets looser) fitted beside k1, its bounds both negative:
+    a pellet whose k1 follows k1 exp(-c (MC - 8)) gives back k1 and c = -0.04 from wet and dry
+    densities at two pressures; bounds that straddle zero are refused, naming the row."""
+    def runner(spec):
+        c = spec.preset.contact
+        k1 = c.k1 * math.exp(-c.moisture_yield * (c.moisture_content - c.moisture_reference))
+        return power_law_runner(dataclasses.replace(spec, preset=spec.preset.with_(
+            contact=dataclasses.replace(c, k1=k1, k2=4 * k1, moisture_yield=0.0))))
+
+    truth = {"k1": 5e4, "contact.moisture_yield": -0.04}
+    targets = []
+    for mc in (8.0, 20.0):
+        for sz in (60e6, 120e6):
+            t = C.Targets(sigma_z=sz, bulk_density=1.0, bulk_density_sd=5.0, mc_percent=mc)
+            out = runner(C.make_spec(truth, sigma_z=sz, diametral=False, contact=t.condition_rows()))["outputs"]
+            targets.append(dataclasses.replace(t, bulk_density=out["bulk_density_relaxed"]))
+    res = C.fit({"k1": (1e4, 2e5, 1e5), "contact.moisture_yield": (-0.2, -0.005)}, targets, runner=runner,
+                max_runs=20, tol=0.05)
+    assert res.params["k1"] == pytest.approx(5e4, rel=0.05)
+    assert res.params["contact.moisture_yield"] == pytest.approx(-0.04, rel=0.05)
+    assert (res.history["contact.moisture_yield"] < 0).all()
+    with pytest.raises(ValueError, match="contact.moisture_yield.*both < 0"):
+        C.fit({"contact.moisture_yield": (-0.1, 0.1)}, targets, runner=runner)
+    with pytest.raises(ValueError, match="'k1'.*must both be > 0"):
+        C.fit({"k1": (-1.0, -0.5)}, targets, runner=runner)

@@ -72,8 +72,8 @@ def add_arguments(p: argparse.ArgumentParser, *, preset: str = "tiny", max_runs:
                    help=f"packings every point averages (the paper's variants: 1..64, default 1; "
                         f"with --data: 2..64, default {DATA_PACKINGS})")
     p.add_argument("--fit", action="append", default=[], metavar="contact.NAME=LO:HI",
-                   help="fit this contact-law row too, beside k1 in the shared compaction fit (a positive "
-                        "strength, in log space; starts at its --set value), e.g. "
+                   help="fit this contact-law row too, beside k1 in the shared compaction fit (a strength "
+                        "of one sign, in log space of its magnitude; starts at its --set value), e.g. "
                         "contact.wood_density_yield=0.3:4 (repeatable)")
     p.add_argument("--per-material", action="store_true",
                    help="fit k1 (and the --fit rows) per material, each on its own wood's densities: the "
@@ -122,8 +122,9 @@ def parse_variants(items):
 
 def parse_fit(items, settings, compaction_runs: int) -> dict:
     """{'contact.<field>': (lo, hi, start)} of ``--fit contact.NAME=LO:HI`` items: rows of the
-    contact law fitted beside k1, in log space (0 < LO < HI), started at their ``settings``
-    value (--set) where it lies inside, else at the bounds' geometric mean. ValueError naming
+    contact law fitted beside k1, in log space of the magnitude (0 < LO < HI, or LO < HI < 0
+    for a negative strength), started at their ``settings`` value (--set) where it lies
+    inside, else at the bounds' geometric mean. ValueError naming
     the first bad item."""
     from .law_settings import parse_setting
     from .loop_simulators import refuse_condition_rows
@@ -142,14 +143,16 @@ def parse_fit(items, settings, compaction_runs: int) -> dict:
             lo, hi = float(lo_text), float(hi_text)
         except ValueError:
             raise ValueError(f"--fit {item!r}: LO and HI must be numbers") from None
-        if not (math.isfinite(lo) and math.isfinite(hi) and 0.0 < lo < hi):
-            raise ValueError(f"--fit {item!r}: need 0 < LO < HI, finite (the fit is in log space)")
+        if not (math.isfinite(lo) and math.isfinite(hi) and (0.0 < lo < hi or lo < hi < 0.0)):
+            raise ValueError(f"--fit {item!r}: need 0 < LO < HI or LO < HI < 0, finite (the fit is in log space "
+                             f"of the magnitude)")
         parse_setting(name, lo)  # the row exists and takes both ends
         parse_setting(name, hi)
         if name in out:
             raise ValueError(f"--fit {name} given twice")
         given = settings.get(name)
-        out[name] = (lo, hi, float(given) if given is not None and lo <= given <= hi else math.sqrt(lo * hi))
+        out[name] = (lo, hi, float(given) if given is not None and lo <= given <= hi
+                     else math.copysign(math.sqrt(lo * hi), hi))
     if out and not compaction_runs:
         raise ValueError("--fit needs the compaction fit: --compaction-runs 1 or more")
     return out

@@ -117,7 +117,7 @@ def calibrate_into(out: Union[str, os.PathLike], variants=None, preset="tiny", *
     ``settings``: {'contact.X': v, 'bond.Y': w} (SI; :mod:`pelletdem.law_settings`) applied
     to the preset's contact law and the base bond law before fitting. ``fit``:
     {'contact.<field>': (lo, hi) or (lo, hi, start)}: contact-law rows fitted beside k1 in the
-    compaction fit (positive, log space). ``per_material``: that fit runs per material, on its
+    compaction fit (of one sign, log space of the magnitude). ``per_material``: that fit runs per material, on its
     own densities (k1 a material parameter; calibration.json's ``contact_by_material``, which
     ``source`` passes on). ``executor``,
     ``max_workers``, ``runner``: as in ``calibrate_variants`` (a Dask ``distributed.Client``

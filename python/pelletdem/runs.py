@@ -39,7 +39,7 @@ from .presets import Preset, get_preset
 
 __all__ = [
     "PARAMETERS", "SCAN_ONLY_PARAMETERS", "CACHE_FORMAT", "RunSpec", "make_spec", "cache_key",
-    "engine_fingerprint", "canonical", "as_preset", "check_positive", "check_names", "parse_bounds",
+    "engine_fingerprint", "canonical", "as_preset", "check_positive", "check_names", "parse_bounds", "bound_signs",
     "RunSetup", "run_setup",
 ]
 
@@ -303,8 +303,11 @@ def parse_bounds(params: Mapping[str, Sequence[float]], start: Optional[Mapping[
     """(names, ln lo, ln hi, ln start) of ``params`` {name: (lo, hi) or (lo, hi, start)} (SI,
     names from :data:`PARAMETERS`); ``start`` {name: value} overrides the
     third entries, and a missing start is the geometric mean of the bounds; a contact-law row
-    ``contact.<field>`` (a positive strength) may be fitted too. ValueError naming
-    the parameter for bad names, reversed or non-positive bounds, NaN, or a start outside."""
+    ``contact.<field>`` may be fitted too, a strength of one sign: where both its bounds are
+    negative (a signed row such as moisture_yield's c), the coordinate is the log of its
+    magnitude (:func:`bound_signs` gives the signs). ValueError naming the parameter for bad
+    names, reversed bounds, bounds of a PARAMETER that are not positive or of a row that
+    straddle zero, NaN, or a start outside."""
     if not isinstance(params, Mapping) or not params:
         raise ValueError("params must be a non-empty mapping {name: (lo, hi)} or {name: (lo, hi, start)}")
     for name in params:
@@ -324,15 +327,18 @@ def parse_bounds(params: Mapping[str, Sequence[float]], start: Optional[Mapping[
             raise ValueError(f"bounds of {name!r} must be (lo, hi) or (lo, hi, start); got {b!r}")
         if any(not math.isfinite(v) for v in vals):
             raise ValueError(f"bounds of {name!r} = {b!r} must be finite (no NaN or inf)")
-        if vals[0] <= 0:
-            raise ValueError(f"lower bound of {name!r} = {vals[0]!r} {unit} must be > 0 (the search is in log space)")
         if not vals[0] < vals[1]:
             raise ValueError(f"bounds of {name!r} are reversed or empty: lo = {vals[0]!r} >= hi = {vals[1]!r} {unit}")
+        negative = contact_row_unit(name) is not None and vals[1] < 0
+        if vals[0] <= 0 and not negative:
+            raise ValueError(f"bounds of {name!r} = {b!r} {unit} must both be > 0"
+                             + (" or both < 0" if contact_row_unit(name) is not None else "")
+                             + " (the search is in log space of the magnitude)")
         s = vals[2] if len(vals) == 3 else None
         if start is not None and name in start:
             s = start[name]
         if s is None:
-            s = math.sqrt(vals[0] * vals[1])
+            s = math.copysign(math.sqrt(vals[0] * vals[1]), vals[1])
         try:
             s = float(s)
         except (TypeError, ValueError):
@@ -340,10 +346,16 @@ def parse_bounds(params: Mapping[str, Sequence[float]], start: Optional[Mapping[
         if not math.isfinite(s) or not vals[0] <= s <= vals[1]:
             raise ValueError(f"start of {name!r} = {s!r} {unit} is outside its bounds [{vals[0]!r}, {vals[1]!r}]")
         names.append(name)
-        lo.append(math.log(vals[0]))
-        hi.append(math.log(vals[1]))
-        x0.append(math.log(s))
+        lo.append(math.log(min(abs(vals[0]), abs(vals[1]))))
+        hi.append(math.log(max(abs(vals[0]), abs(vals[1]))))
+        x0.append(math.log(abs(s)))
     return names, np.array(lo), np.array(hi), np.array(x0)
+
+
+def bound_signs(params: Mapping[str, Sequence[float]]) -> np.ndarray:
+    """The sign (+1 or -1) of each parameter of ``params`` (as :func:`parse_bounds` reads them,
+    in its order): a fit's value is sign * exp(coordinate)."""
+    return np.array([-1.0 if float(b[1]) < 0 else 1.0 for b in params.values()])
 
 
 @dataclass

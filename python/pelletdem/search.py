@@ -59,6 +59,7 @@ from .runs import (
     PARAMETERS,
     RunSetup,
     RunSpec,
+    bound_signs,
     check_names,
     check_positive,
     parameter_unit,
@@ -388,7 +389,7 @@ def _history_row(names, point: _Point, targets) -> dict:
     return row
 
 
-def _scaling_search(problem: _Problem, ev: Evaluator, names, lo, hi, x0, tol, max_runs, max_step,
+def _scaling_search(problem: _Problem, ev: Evaluator, names, values: Callable, lo, hi, x0, tol, max_runs, max_step,
                     min_step, log: Callable) -> Tuple[List[_Point], str, bool]:
     """Gauss-Newton in log space on a local affine model of the log outputs whose slopes start
     at the scaling-law exponents and are refitted to every run so far (noise-tolerant)."""
@@ -396,7 +397,7 @@ def _scaling_search(problem: _Problem, ev: Evaluator, names, lo, hi, x0, tol, ma
     xs: List[np.ndarray] = []
 
     def run(x):
-        p = problem.evaluate({n: float(math.exp(v)) for n, v in zip(names, x)}, ev)
+        p = problem.evaluate(values(x), ev)
         pts.append(p)
         xs.append(np.array(x, dtype=float))
         log(p)
@@ -466,11 +467,11 @@ def _scaling_search(problem: _Problem, ev: Evaluator, names, lo, hi, x0, tol, ma
     return pts, (f"loss {best.loss:.3g} <= tol {tol}" if ok else f"max_runs = {max_runs} reached"), ok
 
 
-def _nelder_mead(problem: _Problem, ev: Evaluator, names, lo, hi, x0, tol, max_runs, log):
+def _nelder_mead(problem: _Problem, ev: Evaluator, values: Callable, lo, hi, x0, tol, max_runs, log):
     pts: List[_Point] = []
 
     def loss(x):
-        p = problem.evaluate({n: float(math.exp(v)) for n, v in zip(names, x)}, ev)
+        p = problem.evaluate(values(x), ev)
         pts.append(p)
         log(p)
         return p.loss
@@ -519,6 +520,10 @@ def fit(params: Mapping[str, Sequence[float]], targets, *, start: Optional[Mappi
     if method not in ("scaling", "nelder-mead"):
         raise ValueError(f"method = {method!r}: allowed 'scaling', 'nelder-mead'")
     names, lo, hi, x0 = parse_bounds(params, start)
+    signs = bound_signs(params)
+
+    def values(x) -> Dict[str, float]:  # a point's parameters (SI) from its coordinates
+        return {n: float(sg * math.exp(v)) for n, sg, v in zip(names, signs, x)}
     if fixed:
         for n, v in fixed.items():
             if not n.startswith("contact."):
@@ -540,7 +545,7 @@ def fit(params: Mapping[str, Sequence[float]], targets, *, start: Optional[Mappi
         raise ValueError("targets is empty: nothing to fit against")
     setup = run_setup(preset, bond, contact, seeds, max_dLD)
     problem = _Problem(names, tg, setup, criterion, fixed)
-    problem.specs({n: float(math.exp(v)) for n, v in zip(names, x0)})  # validate before running
+    problem.specs(values(x0))  # validate before running
 
     def log(p: _Point):
         if verbose:
@@ -551,9 +556,9 @@ def fit(params: Mapping[str, Sequence[float]], targets, *, start: Optional[Mappi
 
     def go(ev):
         if method == "scaling":
-            return _scaling_search(problem, ev, names, lo, hi, x0, tol, max_runs, math.log(max_step),
+            return _scaling_search(problem, ev, names, values, lo, hi, x0, tol, max_runs, math.log(max_step),
                                    math.log(min_step), log)
-        return _nelder_mead(problem, ev, names, lo, hi, x0, tol, max_runs, log)
+        return _nelder_mead(problem, ev, values, lo, hi, x0, tol, max_runs, log)
 
     if evaluator is not None:
         ev = evaluator

@@ -222,7 +222,7 @@ def calibrate_variants(variants=None, preset="tiny", *,
             raise ValueError(f"contact.{row} is set by each variant's {what}: do not set it")
     # the law as the fit starts it: where its yield depends on the wood's density, each material
     # relaxes its own pellets; where a moisture effect acts, each moisture content
-    rows = {n[len("contact."):]: (b[2] if len(b) == 3 else math.sqrt(b[0] * b[1]))
+    rows = {n[len("contact."):]: (b[2] if len(b) == 3 else math.copysign(math.sqrt(b[0] * b[1]), b[1]))
             for n, b in (compaction or {}).items() if n.startswith("contact.")}
     law = dataclasses.replace(p.contact, **{**dict(contact or {}), **rows})
     core = law.to_core()
