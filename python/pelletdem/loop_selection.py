@@ -481,6 +481,7 @@ def close_loop(sim: Simulator, data: Dataset, base_bounds: Mapping[str, Sequence
     chosen: List[str] = []
     powers: Dict[str, Power] = {}
     n_rep = int(np.median([o.n for o in fit_data.observations]))
+    set_rows = sim.base_rows()
     while True:
         residual = describe_residual(fit_data, model.z_direct, model.n_params)
         remaining = []
@@ -490,6 +491,16 @@ def close_loop(sim: Simulator, data: Dataset, base_bounds: Mapping[str, Sequence
             why = clash([library[c] for c in chosen] + [e]) if chosen else ""
             if why:
                 say(f"{name} is not tried with {', '.join(chosen)}: {why}")
+                continue
+            # an effect the base model sets is in it already; one its laws refuse beside the
+            # model would stop the loop at its first simulation
+            given = sorted(p for p in e.settings(e.probe) if p in set_rows)
+            if given:
+                say(f"{name} is not tried: the model sets {', '.join(given)} itself")
+                continue
+            why = sim.refusal(dict(model.fit.params, **e.settings(e.probe)), fit_data.conditions)
+            if why:
+                say(f"{name} is not tried with the model: {why}")
                 continue
             remaining.append(e)
         if not remaining or len(chosen) >= max_effects:

@@ -135,6 +135,18 @@ class Simulator:
         its points share one. False where the simulator cannot tell."""
         return False
 
+    def base_rows(self) -> Dict[str, float]:
+        """The law rows its base model sets itself ({'contact.x': v, 'bond.y': w}, SI; a
+        manifest's or ``--set`` values): a candidate effect whose row is among them is part of
+        the model already. None known by default."""
+        return {}
+
+    def refusal(self, params: Mapping[str, float], conditions: Sequence[Condition]) -> str:
+        """Why ``params`` (SI) cannot run at ``conditions`` (the laws' own checks, before any
+        simulation: two laws of the unloading stiffness at once, for instance); "" when they
+        can, and by default."""
+        return ""
+
     def close(self) -> None:
         """Release workers (no-op by default)."""
 
@@ -292,6 +304,26 @@ class EngineSimulator(Simulator):
     def n_simulations(self) -> int:
         """Simulations run now (the cache's hits are not counted)."""
         return self.evaluator.n_run
+
+    def base_rows(self) -> Dict[str, float]:
+        """The contact-law rows given to it (``contact=``) and the bond law's fields that differ
+        from :class:`BondLaw`'s defaults, as {'contact.x': v, 'bond.y': w} (SI)."""
+        rows = {f"contact.{k}": v for k, v in (self.setup.contact or {}).items()}
+        default = BondLaw()
+        for f in dataclasses.fields(BondLaw):
+            if getattr(self.setup.bond, f.name) != getattr(default, f.name):
+                rows[f"bond.{f.name}"] = getattr(self.setup.bond, f.name)
+        return rows
+
+    def refusal(self, params, conditions) -> str:
+        """The laws' refusal of ``params`` at any of ``conditions`` (their runs' specs are made,
+        nothing is simulated); "" when every one can run."""
+        try:
+            for c in conditions:
+                self._spec(params, c, self.default_seeds[0])
+        except ValueError as err:
+            return str(err)
+        return ""
 
     def same_relaxation(self, a, b, conditions) -> bool:
         """Whether ``a`` and ``b`` (SI) give the same relaxed pellets: the same relax key of

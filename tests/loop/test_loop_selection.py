@@ -238,6 +238,41 @@ def test_a_candidate_that_cannot_join_the_added_effect_is_not_tried_with_it():
                for line in res.log), "\n".join(res.log)
 
 
+def test_a_candidate_the_model_sets_or_its_laws_refuse_is_not_tried():
+    """A candidate whose row the base model sets (a --set) is part of it already, and one the
+    laws refuse beside the model (two laws of the unloading stiffness, say) would stop the loop
+    at its first simulation: both are named in the log and left out; the others are screened."""
+    class Sim(FunctionSimulator):
+        def base_rows(self):
+            return {"contact.unloading_growth": 5.0}
+
+        def refusal(self, params, conditions):
+            return "the toe's law is refused here" if "contact.plate_yield_stress" in params else ""
+
+    sim = Sim(toy)
+    data = synthetic_dataset(sim, {**TRUTH, **LIBRARY["trend"].settings(HIDDEN["trend"])}, FIT + HELD,
+                             noise=0.02, compaction_points=4, seeds=[1000 + k for k in range(5)], seed=0)
+    res = close_loop(sim, data, BOUNDS, START, held_out=lambda c: c in HELD, library=LIBRARY, max_effects=1)
+    log = "\n".join(res.log)
+    assert "springback is not tried: the model sets contact.unloading_growth itself" in log, log
+    assert "toe is not tried with the model: the toe's law is refused here" in log, log
+    screened = {sc.effect.name for sc in res.steps[0].screens}
+    assert screened == {"tail", "trend"}, log
+    assert res.chosen == ["trend"], log
+
+
+def test_the_engine_simulator_names_the_rows_it_sets_and_what_its_laws_refuse():
+    from pelletdem.engine import BondLaw
+    from pelletdem.loop import Condition, EngineSimulator
+
+    conds = [Condition(60e6), Condition(120e6)]
+    with EngineSimulator("tiny", contact={"plastic_stiffness_ratio": 50.0}, bond=BondLaw(softening=1.0)) as sim:
+        assert sim.base_rows() == {"contact.plastic_stiffness_ratio": 50.0, "bond.softening": 1.0}
+        assert "two effects that shape the unloading" in sim.refusal({"contact.unloading_growth": 5.0}, conds)
+        assert sim.refusal({"E_b": 1e8, "contact.hardening": 1.0}, conds) == ""
+        assert sim.n_simulations == 0
+
+
 def test_a_base_parameter_pinned_at_its_box_is_let_go():
     """The data's E_b (100 MPa) lies above the box (30-70 MPa): the baseline's fit is pinned at
     the upper end, so the box is widened there and the fit lands on the truth, with nothing
