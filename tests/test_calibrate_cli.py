@@ -19,6 +19,7 @@ import numpy as np
 import pytest
 
 from pelletdem import calibration_dir, cli
+from pelletdem.presets import get_preset
 from pelletdem.variants import calibrate_variants
 from test_calibrate import CALLS, power_law_runner
 
@@ -84,7 +85,7 @@ def _main(argv):
     (["--fit", "contact.wood_density_yield=-1:4"], "--fit", "0 < LO < HI or LO < HI < 0"),
     (["--fit", "contact.moisture_yield=-0.1:-0.2"], "--fit", "LO < HI < 0"),
     (["--fit", "contact.wood_density_yield=0.3:40"], "contact.wood_density_yield", "allowed"),
-    (["--fit", "contact.k1=1e4:1e5"], "--fit", "k1 is fitted already"),
+    (["--fit", "contact.k2=1e4:1e5"], "--fit", "k2 is not fitted"),
     (["--fit", "contact.moisture_content=5:20"], "contact.moisture_content", "each condition's moisture"),
     (["--fit", "contact.wood_density_yield=0.3:4", "--compaction-runs", "0"], "--fit", "--compaction-runs 1"),
     (["--fit", "contact.wood_density_yield=0.3:4", "--data", "example"], "--fit", "manifest"),
@@ -360,6 +361,30 @@ def test_k1_per_material_is_fitted_on_each_woods_own_densities(tmp_path):
     with pytest.raises(ValueError, match="moisture_content"):
         calibrate_variants(two, "tiny", compaction=None,
                                            contact_by_material={"oak": {"moisture_content": 12.0}}, runner=runner)
+
+
+def test_k1_fitted_alone_keeps_k2(tmp_path):
+    """--fit contact.k1: the compaction fit moves k1 and keeps the preset's k2 (its --set value),
+    where the plain fit keeps k2 / k1; every run of the calibration takes that k2."""
+    seen = []
+
+    def runner(spec):
+        seen.append((spec.kind, spec.preset.contact.k1, spec.preset.contact.k2))
+        return power_law_runner(spec)
+
+    two = [("oak", 8, 60), ("oak", 8, 120)]
+    rep = calibration_dir.calibrate_into(tmp_path / "k1", two, "tiny", max_runs=1, compaction_runs=4,
+                                         executor="serial", settings={"contact.k2": 2e5},
+                                         fit={"contact.k1": (1e4, 1.5e5, 5e4)}, runner=runner, log=lambda s: None)
+    assert set(rep.contact) == {"k1"} and 1e4 <= rep.contact["k1"] <= 1.5e5
+    assert len({k1 for _, k1, _ in seen}) >= 2  # k1 moved
+    assert {k2 for _, _, k2 in seen} == {2e5}  # k2 did not
+    assert {k1 for kind, k1, _ in seen if kind == "diametral"} == {rep.contact["k1"]}
+    seen.clear()
+    plain = calibration_dir.calibrate_into(tmp_path / "plain", two, "tiny", max_runs=1, compaction_runs=4,
+                                           executor="serial", settings={"contact.k2": 2e5}, runner=runner,
+                                           log=lambda s: None)
+    assert plain.contact["k2"] / plain.contact["k1"] == pytest.approx(2e5 / get_preset("tiny").contact.k1)
 
 
 def test_calibrate_into_from_an_earlier_calibration(tmp_path):

@@ -122,7 +122,8 @@ def parse_variants(items):
 
 def parse_fit(items, settings, compaction_runs: int) -> dict:
     """{'contact.<field>': (lo, hi, start)} of ``--fit contact.NAME=LO:HI`` items: rows of the
-    contact law fitted beside k1, in log space of the magnitude (0 < LO < HI, or LO < HI < 0
+    contact law fitted beside k1 (``contact.k1``: k1 itself, with k2 kept at its --set value
+    instead of following it), in log space of the magnitude (0 < LO < HI, or LO < HI < 0
     for a negative strength), started at their ``settings`` value (--set) where it lies
     inside, else at the bounds' geometric mean. ValueError naming
     the first bad item."""
@@ -137,8 +138,9 @@ def parse_fit(items, settings, compaction_runs: int) -> dict:
         if not eq or not colon or not name.startswith("contact."):
             raise ValueError(f"--fit {item!r}: expected contact.NAME=LO:HI (a contact-law row)")
         refuse_condition_rows([name], "--fit")
-        if name in ("contact.k1", "contact.k2"):
-            raise ValueError(f"--fit {item!r}: k1 is fitted already (k2 follows it)")
+        if name == "contact.k2":
+            raise ValueError(f"--fit {item!r}: k2 is not fitted (set it with --set; --fit contact.k1 fits k1 "
+                             f"with k2 kept)")
         try:
             lo, hi = float(lo_text), float(hi_text)
         except ValueError:

@@ -117,8 +117,9 @@ def calibrate_into(out: Union[str, os.PathLike], variants=None, preset="tiny", *
     ``settings``: {'contact.X': v, 'bond.Y': w} (SI; :mod:`pelletdem.law_settings`) applied
     to the preset's contact law and the base bond law before fitting. ``fit``:
     {'contact.<field>': (lo, hi) or (lo, hi, start)}: contact-law rows fitted beside k1 in the
-    compaction fit (of one sign, log space of the magnitude). ``per_material``: that fit runs per material, on its
-    own densities (k1 a material parameter; calibration.json's ``contact_by_material``, which
+    compaction fit, each of one sign, in log space of its magnitude (``contact.k1`` in k1's
+    place: k1 fitted with k2 kept). ``per_material``: that fit runs per material, on its own
+    densities (k1 a material parameter; calibration.json's ``contact_by_material``, which
     ``source`` passes on). ``executor``,
     ``max_workers``, ``runner``: as in ``calibrate_variants`` (a Dask ``distributed.Client``
     is an executor). ``log``: where the report's text goes. The preset runs with the paper's
@@ -145,7 +146,9 @@ def calibrate_into(out: Union[str, os.PathLike], variants=None, preset="tiny", *
                      contact_by_material=src.get("contact_by_material") or None)
     elif compaction_runs:
         k1 = p.contact.k1
-        setup = dict(compaction={"k1": (k1 / 10, k1 * 10, k1), **dict(fit or {})}, compaction_max_runs=compaction_runs,
+        # contact.k1 fits k1 with k2 kept; plain k1 keeps k2 / k1 (eq. 8's restitution)
+        own = {} if "contact.k1" in (fit or {}) else {"k1": (k1 / 10, k1 * 10, k1)}
+        setup = dict(compaction={**own, **dict(fit or {})}, compaction_max_runs=compaction_runs,
                      per_material=per_material)
     else:
         setup = dict(compaction=None)

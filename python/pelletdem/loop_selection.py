@@ -494,9 +494,8 @@ def close_loop(sim: Simulator, data: Dataset, base_bounds: Mapping[str, Sequence
                 continue
             # an effect the base model sets is in it already; one its laws refuse beside the
             # model would stop the loop at its first simulation
-            given = sorted(p for p in e.settings(e.probe) if p in set_rows)
-            if given:
-                say(f"{name} is not tried: the model sets {', '.join(given)} itself")
+            if e.param in set_rows and set_rows[e.param] != e.off:
+                say(f"{name} is not tried: the model sets {e.param} itself")
                 continue
             why = sim.refusal(dict(model.fit.params, **e.settings(e.probe)), fit_data.conditions)
             if why:

@@ -141,9 +141,11 @@ def calibrate_variants(variants=None, preset="tiny", *,
        pressure matches the mean of Table 2's pellet densities over the variants at that
        pressure, each taken to the preset's particle density at its own BD_p / BD_w (SD:
        within- and between-variant spread, :func:`compaction_targets`); k2/k1 stays fixed
-       (e = 0.5). Where a moisture effect acts, wet and dry are their own targets, each run at
-       its moisture content; where the yield depends on the wood's density
-       (``wood_density_yield``), so is each material, run at its BD_w. The paper fitted p_y
+       (e = 0.5), or, with the row ``contact.k1`` fitted in place of ``k1``, k2 stays the
+       preset's (the elastic stiffness kept while the yield moves). Where a moisture effect
+       acts, wet and dry are their own targets, each run at its moisture content; where the
+       yield depends on the wood's density (``wood_density_yield``), so is each material, run
+       at its BD_w. The paper fitted p_y
        to the compaction curves instead; Table 2 is what ships with the package.
        ``per_material``: the fit runs once per material (concurrently), on that material's
        densities alone, so k1 and the rows fitted with it are material parameters, as the
@@ -252,10 +254,13 @@ def calibrate_variants(variants=None, preset="tiny", *,
                 comp_fits = dict(zip(subsets, drivers.map(fit_compaction, subsets.values())))
             laws = {}
             for m, f in comp_fits.items():
-                fitted = dict(f.params)
-                k1 = fitted.pop("k1") if "k1" in fitted else k1_from_yield_strength(fitted.pop("p_y"), p.radius_mean)
-                laws[m] = {"k1": k1, "k2": k1 * p.contact.k2 / p.contact.k1,
-                           **{n[len("contact."):]: v for n, v in fitted.items()}}
+                fitted, law_m = dict(f.params), {}
+                if "k1" in fitted or "p_y" in fitted:  # k2 follows k1 (eq. 8's restitution kept)
+                    k1 = fitted.pop("k1") if "k1" in fitted else k1_from_yield_strength(fitted.pop("p_y"),
+                                                                                        p.radius_mean)
+                    law_m = {"k1": k1, "k2": k1 * p.contact.k2 / p.contact.k1}
+                # a contact.k1 row sets k1 alone: k2 stays the preset's
+                laws[m] = {**law_m, **{n[len("contact."):]: v for n, v in fitted.items()}}
             if per_material:
                 contact_by_material = laws
             else:

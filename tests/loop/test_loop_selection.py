@@ -243,8 +243,8 @@ def test_a_candidate_the_model_sets_or_its_laws_refuse_is_not_tried():
     laws refuse beside the model (two laws of the unloading stiffness, say) would stop the loop
     at its first simulation: both are named in the log and left out; the others are screened."""
     class Sim(FunctionSimulator):
-        def base_rows(self):
-            return {"contact.unloading_growth": 5.0}
+        def base_rows(self):  # an effect's row set at its "off" value leaves it a candidate
+            return {"contact.unloading_growth": 5.0, "bond.softening": 0.0}
 
         def refusal(self, params, conditions):
             return "the toe's law is refused here" if "contact.plate_yield_stress" in params else ""
