@@ -605,23 +605,32 @@ def test_other_bad_inputs_name_the_parameter():
     assert CALLS == []
 
 
+def _yield_factor_problem(factor, off, truth, conditions):
+    """A stand-in pellet whose k1 is k1 * factor(contact law) (k2 = 4 k1, the effect's row set to
+    ``off`` before the power-law stand-in runs), and density targets at ``conditions`` (Targets
+    keyword arguments, each at 60 and 120 MPa) made by it with the parameters ``truth``."""
+    def runner(spec):
+        c = spec.preset.contact
+        k1 = c.k1 * factor(c)
+        return power_law_runner(dataclasses.replace(spec, preset=spec.preset.with_(
+            contact=dataclasses.replace(c, k1=k1, k2=4 * k1, **off))))
+
+    targets = []
+    for cond in conditions:
+        for sz in (60e6, 120e6):
+            t = C.Targets(sigma_z=sz, bulk_density=1.0, bulk_density_sd=5.0, **cond)
+            out = runner(C.make_spec(truth, sigma_z=sz, diametral=False, contact=t.condition_rows()))["outputs"]
+            targets.append(dataclasses.replace(t, bulk_density=out["bulk_density_relaxed"]))
+    return runner, targets
+
+
 def test_a_contact_rows_strength_is_fitted_beside_k1():
     """A yield effect's strength fitted with k1: a pellet whose density follows the effect's
     law, k1 (rho_w / 680)^n, gives back k1 and n from the densities of two woods at two
     pressures."""
-    def runner(spec):
-        c = spec.preset.contact
-        k1 = c.k1 * (c.wood_density / c.wood_density_reference) ** c.wood_density_yield
-        return power_law_runner(dataclasses.replace(spec, preset=spec.preset.with_(
-            contact=dataclasses.replace(c, k1=k1, k2=4 * k1, wood_density_yield=0.0))))
-
-    truth = {"k1": 5e4, "contact.wood_density_yield": 2.0}
-    targets = []
-    for rho in (500.0, 700.0):
-        for sz in (60e6, 120e6):
-            t = C.Targets(sigma_z=sz, bulk_density=1.0, bulk_density_sd=5.0, wood_density=rho)
-            out = runner(C.make_spec(truth, sigma_z=sz, diametral=False, contact=t.condition_rows()))["outputs"]
-            targets.append(dataclasses.replace(t, bulk_density=out["bulk_density_relaxed"]))
+    runner, targets = _yield_factor_problem(
+        lambda c: (c.wood_density / c.wood_density_reference) ** c.wood_density_yield, {"wood_density_yield": 0.0},
+        {"k1": 5e4, "contact.wood_density_yield": 2.0}, [{"wood_density": 500.0}, {"wood_density": 700.0}])
     res = C.fit({"k1": (1e4, 2e5, 1e5), "contact.wood_density_yield": (0.3, 5.0, 1.0)}, targets, runner=runner,
                 max_runs=20, tol=0.05)
     assert res.params["k1"] == pytest.approx(5e4, rel=0.05)
@@ -637,19 +646,9 @@ def test_a_negative_strength_is_fitted_in_log_space_of_its_magnitude():
     """moisture_yield's c < 0 (wetter pellets looser) fitted beside k1, its bounds both negative:
     a pellet whose k1 follows k1 exp(-c (MC - 8)) gives back k1 and c = -0.04 from wet and dry
     densities at two pressures; bounds that straddle zero are refused, naming the row."""
-    def runner(spec):
-        c = spec.preset.contact
-        k1 = c.k1 * math.exp(-c.moisture_yield * (c.moisture_content - c.moisture_reference))
-        return power_law_runner(dataclasses.replace(spec, preset=spec.preset.with_(
-            contact=dataclasses.replace(c, k1=k1, k2=4 * k1, moisture_yield=0.0))))
-
-    truth = {"k1": 5e4, "contact.moisture_yield": -0.04}
-    targets = []
-    for mc in (8.0, 20.0):
-        for sz in (60e6, 120e6):
-            t = C.Targets(sigma_z=sz, bulk_density=1.0, bulk_density_sd=5.0, mc_percent=mc)
-            out = runner(C.make_spec(truth, sigma_z=sz, diametral=False, contact=t.condition_rows()))["outputs"]
-            targets.append(dataclasses.replace(t, bulk_density=out["bulk_density_relaxed"]))
+    runner, targets = _yield_factor_problem(
+        lambda c: math.exp(-c.moisture_yield * (c.moisture_content - c.moisture_reference)), {"moisture_yield": 0.0},
+        {"k1": 5e4, "contact.moisture_yield": -0.04}, [{"mc_percent": 8.0}, {"mc_percent": 20.0}])
     res = C.fit({"k1": (1e4, 2e5, 1e5), "contact.moisture_yield": (-0.2, -0.005)}, targets, runner=runner,
                 max_runs=20, tol=0.05)
     assert res.params["k1"] == pytest.approx(5e4, rel=0.05)
