@@ -28,7 +28,7 @@ from .engine import BondLaw, k1_from_yield_strength
 from .execution import Evaluator, open_executor, with_relaxed_dir
 from .objectives import Targets, as_variants, compaction_targets, mean_outputs
 from .run_cache import RunCache
-from .runs import RunSpec, as_preset, make_spec, parse_bounds, run_setup
+from .runs import RunSpec, as_preset, bound_signs, make_spec, parse_bounds, run_setup
 from .search import FitResult, fit
 from .worker import relaxed_path, run_point
 
@@ -224,8 +224,11 @@ def calibrate_variants(variants=None, preset="tiny", *,
             raise ValueError(f"contact.{row} is set by each variant's {what}: do not set it")
     # the law as the fit starts it: where its yield depends on the wood's density, each material
     # relaxes its own pellets; where a moisture effect acts, each moisture content
-    rows = {n[len("contact."):]: (b[2] if len(b) == 3 else math.copysign(math.sqrt(b[0] * b[1]), b[1]))
-            for n, b in (compaction or {}).items() if n.startswith("contact.")}
+    rows = {}
+    if compaction is not None:  # the fit's start, as parse_bounds reads it (its sign kept)
+        fitted_names, _, _, x0 = parse_bounds(compaction)
+        rows = {n[len("contact."):]: float(sg * math.exp(u))
+                for n, sg, u in zip(fitted_names, bound_signs(compaction), x0) if n.startswith("contact.")}
     law = dataclasses.replace(p.contact, **{**dict(contact or {}), **rows})
     core = law.to_core()
     wood_acts, by_mc = core.wood_density_acts(), core.moisture_acts()
