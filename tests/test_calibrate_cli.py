@@ -387,6 +387,38 @@ def test_k1_fitted_alone_keeps_k2(tmp_path):
     assert plain.contact["k2"] / plain.contact["k1"] == pytest.approx(2e5 / get_preset("tiny").contact.k1)
 
 
+def test_from_k1_per_material_allows_a_k2_below_the_presets_k1(no_calibration, tmp_path):
+    """--set rows with --from go on the law they will run with: each wood's k1 from the
+    earlier calibration (below the preset's 1e5 N/m here), so k2 = 6e4 is allowed, and
+    refused, naming k2, where it is below a wood's own k1."""
+    src = tmp_path / "src"
+    src.mkdir()
+    by_material = {"oak": {"k1": 1.5e4}, "pine": {"k1": 7e3}}
+    (src / "calibration.json").write_text(json.dumps({"contact": {}, "contact_by_material": by_material,
+                                                      "bond_start": {}}))
+    args = [*("calibrate", str(tmp_path / "out"), "--from", str(src)), "--set", "contact.k2=6e4"]
+    assert _main(args) == 0 and len(no_calibration) == 1
+    assert _main([*args[:-1], "contact.k2=1e4"]) == 2
+
+
+def test_calibrate_into_from_k1_per_material_runs_each_wood_with_the_set_k2(tmp_path):
+    src = tmp_path / "src"
+    src.mkdir()
+    by_material = {"oak": {"k1": 1.5e4}, "pine": {"k1": 7e3}}
+    (src / "calibration.json").write_text(json.dumps({"contact": {}, "contact_by_material": by_material,
+                                                      "bond_start": {}}))
+    seen = []
+
+    def runner(spec):
+        seen.append((spec.preset.contact.k1, spec.preset.contact.k2))
+        return power_law_runner(spec)
+
+    calibration_dir.calibrate_into(tmp_path / "out", [("oak", 8, 120), ("pine", 8, 120)], "tiny", max_runs=1,
+                                   source=src, settings={"contact.k2": 6e4}, executor="serial", runner=runner,
+                                   log=lambda s: None)
+    assert set(seen) == {(1.5e4, 6e4), (7e3, 6e4)}
+
+
 def test_calibrate_into_from_an_earlier_calibration(tmp_path):
     calibration_dir.calibrate_into(tmp_path / "small", VARIANTS, "tiny", max_runs=4, executor="serial",
                                    runner=power_law_runner, log=lambda s: None)

@@ -25,6 +25,7 @@ added; `pelletdem loop` looks for one.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import importlib.util
 import math
 import os
@@ -168,7 +169,6 @@ def check(args) -> dict:
     from .laws import BondLaw
     from .loop_simulators import refuse_condition_rows
     from .presets import get_preset
-    from .runs import make_spec
 
     out = str(args.out)
     if not out.strip() or (os.path.exists(out) and not os.path.isdir(out)):
@@ -200,24 +200,33 @@ def check(args) -> dict:
             raise ValueError(f"--set {name}: the calibration fits {FITTED[name]} per variant; "
                              f"allowed: the other bond parameters and any contact.X")
     preset = get_preset(args.preset or args.preset_default)
-    contact, _ = apply_settings(preset.contact, BondLaw(), settings)
+    laws = [{}]  # the contact laws the --set rows go on: the preset's, or each of --from's
     if args.source is not None:
         try:
             src = load_calibration(args.source)
         except ValueError as e:
             raise ValueError(f"--from {e}") from None
         by_material = (src.get("contact_by_material") or {}).values()
-        laws = [src["contact"]] + [{**src["contact"], **rows} for rows in by_material]
+        # with k1 per material the shared law alone never runs
+        laws = [{**src["contact"], **rows} for rows in by_material] or [src["contact"]]
         given = sorted({k for law in laws for k in law})
         fixed = [f"contact.{k}" for k in given if f"contact.{k}" in settings]
         if fixed:
             raise ValueError(f"--set {', '.join(fixed)} with --from {args.source}: the contact law's "
                              f"{', '.join(given)} come from that calibration")
+    for law in laws:
+        # checked on the law they will run with: --from's k1 (per material) may be below the
+        # preset's, and a --set k2 is then allowed below the preset's k1
         try:
-            for law in laws:
-                make_spec({}, preset=preset.with_(contact=contact), diametral=False, contact=law)
-        except (ValueError, TypeError) as e:
+            contact = dataclasses.replace(preset.contact, **law)
+        except TypeError as e:
             raise ValueError(f"--from {args.source}: its contact law is refused: {e}") from None
+        try:
+            apply_settings(contact, BondLaw(), settings)
+        except ValueError as e:
+            if not law:
+                raise
+            raise ValueError(f"--from {args.source}: its contact law is refused with the --set rows: {e}") from None
     if args.dask is not None:
         if not args.dask.strip():
             raise ValueError("--dask ADDRESS is empty: give the scheduler's address, e.g. tcp://host:8786")

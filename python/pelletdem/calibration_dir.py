@@ -14,6 +14,7 @@ time of all of them, killed ones included (up to their last finished run, a lowe
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import time
@@ -137,11 +138,18 @@ def calibrate_into(out: Union[str, os.PathLike], variants=None, preset="tiny", *
         raise ValueError("per_material = True needs the compaction fit: compaction_runs >= 1 and no source")
     p = paper_preset(preset)
     settings = dict(settings or {})
-    contact, bond = apply_settings(p.contact, BondLaw(), settings)
+    src = load_calibration(source) if source is not None else None
+    base = p.contact
+    if src is not None:
+        # the settings go on the law they run with: the source's, with its first material's
+        # rows where it has k1 per material (that k1 may be below the preset's, and a set k2
+        # then below the preset's k1); calibrate_variants puts each material's own in force
+        rows = next(iter((src.get("contact_by_material") or {}).values()), {})
+        base = dataclasses.replace(p.contact, **{**src["contact"], **rows})
+    contact, bond = apply_settings(base, BondLaw(), settings)
     p = p.with_(contact=contact)
     vs = as_variants(variants)
-    if source is not None:
-        src = load_calibration(source)
+    if src is not None:
         setup = dict(compaction=None, contact=src["contact"], start=src["bond_start"],
                      contact_by_material=src.get("contact_by_material") or None)
     elif compaction_runs:
