@@ -29,6 +29,7 @@ CASES = [
     ("overlap_bond_radius", {}, {"overlap_radius_gain": 3.0}),
     ("moisture_bonds", {"moisture_content": 20.0}, {"moisture_coefficient": 0.03}),
     ("moisture_yield", {"moisture_yield": 0.03, "moisture_content": 20.0}, {}),
+    ("densified_yield", {"densified_yield": 3.0}, {}),
 ]
 
 
