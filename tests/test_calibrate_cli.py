@@ -387,26 +387,30 @@ def test_k1_fitted_alone_keeps_k2(tmp_path):
     assert plain.contact["k2"] / plain.contact["k1"] == pytest.approx(2e5 / get_preset("tiny").contact.k1)
 
 
-def test_from_k1_per_material_allows_a_k2_below_the_presets_k1(no_calibration, tmp_path):
+def _per_material_source(tmp_path):
+    """An earlier calibration's directory with k1 per material, oak's and pine's below the
+    preset's (N/m)."""
+    src = tmp_path / "src"
+    src.mkdir()
+    (src / "calibration.json").write_text(json.dumps({
+        "contact": {}, "contact_by_material": {"oak": {"k1": 1.5e4}, "pine": {"k1": 7e3}}, "bond_start": {}}))
+    return src
+
+
+def test_from_k1_per_material_allows_a_k2_below_the_presets_k1(no_calibration, capsys, tmp_path):
     """--set rows with --from go on the law they will run with: each wood's k1 from the
     earlier calibration (below the preset's 1e5 N/m here), so k2 = 6e4 is allowed, and
     refused, naming k2, where it is below a wood's own k1."""
-    src = tmp_path / "src"
-    src.mkdir()
-    by_material = {"oak": {"k1": 1.5e4}, "pine": {"k1": 7e3}}
-    (src / "calibration.json").write_text(json.dumps({"contact": {}, "contact_by_material": by_material,
-                                                      "bond_start": {}}))
+    src = _per_material_source(tmp_path)
     args = [*("calibrate", str(tmp_path / "out"), "--from", str(src)), "--set", "contact.k2=6e4"]
     assert _main(args) == 0 and len(no_calibration) == 1
     assert _main([*args[:-1], "contact.k2=1e4"]) == 2
+    assert "k2 = 10000 N/m is below k1 = 15000" in capsys.readouterr().err
 
 
 def test_calibrate_into_from_k1_per_material_runs_each_wood_with_the_set_k2(tmp_path):
-    src = tmp_path / "src"
-    src.mkdir()
-    by_material = {"oak": {"k1": 1.5e4}, "pine": {"k1": 7e3}}
-    (src / "calibration.json").write_text(json.dumps({"contact": {}, "contact_by_material": by_material,
-                                                      "bond_start": {}}))
+    """Every run takes its wood's k1 from the source and the set k2 (N/m)."""
+    src = _per_material_source(tmp_path)
     seen = []
 
     def runner(spec):
