@@ -145,7 +145,10 @@ def calibrate_into(out: Union[str, os.PathLike], variants=None, preset="tiny", *
         # rows where it has k1 per material (that k1 may be below the preset's, and a set k2
         # then below the preset's k1); calibrate_variants puts each material's own in force
         rows = next(iter((src.get("contact_by_material") or {}).values()), {})
-        base = dataclasses.replace(p.contact, **{**src["contact"], **rows})
+        try:
+            base = dataclasses.replace(p.contact, **{**src["contact"], **rows})
+        except TypeError as e:  # a row the contact law does not have
+            raise ValueError(f"source = {os.fspath(source)!r}: its contact law is refused: {e}") from None
     contact, bond = apply_settings(base, BondLaw(), settings)
     p = p.with_(contact=contact)
     vs = as_variants(variants)
