@@ -10,9 +10,9 @@
 // a test in which no contact yields.
 #include "pelletdem/effect.hpp"
 
-#define PELLETDEM_ROWS_DensifiedYield(X)                                                             \
-  X(double, densified_yield, 1.0, Range, 1.0, 1.0e4, "-", "densified_yield", true,                   \
-    "Y: k1 of the made pellet's contacts over the loose sawdust's, from the bonding on (stage "      \
+#define PELLETDEM_ROWS_DensifiedYield(X)                                                        \
+  X(double, densified_yield, 1.0, Range, 1.0, 1.0e4, "-", "densified_yield", true,              \
+    "Y: k1 of the made pellet's contacts over the loose sawdust's, from the bonding on (stage " \
     "'diametral'); 1 off")
 
 namespace pelletdem {
