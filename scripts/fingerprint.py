@@ -30,6 +30,7 @@ CASES = [
     ("moisture_bonds", {"moisture_content": 20.0}, {"moisture_coefficient": 0.03}),
     ("moisture_yield", {"moisture_yield": 0.03, "moisture_content": 20.0}, {}),
     ("densified_yield", {"densified_yield": 3.0}, {}),
+    ("interlocking_friction", {"interlocking_friction": 2.0}, {}),
 ]
 
 

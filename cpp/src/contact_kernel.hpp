@@ -27,7 +27,7 @@ PELLETDEM_INLINE ContactForce contact_force(Index i, Index j, ContactHistory& h,
                                             PairStats& out) {
   const double ri = p.r[i], rj = p.r[j];
   ContactKinematics c{g.delta, g.vn, g.vt, g.n, ri * rj / (ri + rj), p.m[i] * p.m[j] / (p.m[i] + p.m[j])};
-  const ContactForce cf = law.evaluate(c, h, dt_inc, cp.mu, adh);
+  const ContactForce cf = law.evaluate(c, h, dt_inc, law.mu(), adh);
   ++out.contacts;
   const double ov = g.delta / std::min(ri, rj);
   if (ov > out.max_ov) {
@@ -135,7 +135,7 @@ PELLETDEM_INLINE void contact_law_lanes(const PairLanes& q, const L4& hist, cons
   for (int k = 0; k < kLanes; ++k) root[k] = std::sqrt(mk[k]);
   const Lane gamma_t = law.damping_factor() * root;
   ft = {hft.x - gamma_t * vt.x, hft.y - gamma_t * vt.y, hft.z - gamma_t * vt.z};
-  const Lane limit = cp.mu * lane_select(fn < 0.0, Lane{}, fn);  // mu std::max(fn, 0)
+  const Lane limit = law.mu() * lane_select(fn < 0.0, Lane{}, fn);  // mu std::max(fn, 0)
   const Lane ft2 = lane_dot(ft, ft);
   const LaneMask slide = ft2 > limit * limit;
   if (lane_any(slide)) {

@@ -46,7 +46,8 @@ def test_bad_bond_effect_parameters_name_themselves(field, value):
                                          ("hardening_exponent", 9.0), ("moisture_yield", 2.0),
                                          ("moisture_content", 150.0), ("moisture_reference", -1.0),
                                          ("wood_density_yield", 20.0), ("wood_density", 10.0),
-                                         ("wood_density_reference", float("nan")), ("densified_yield", 0.5)])
+                                         ("wood_density_reference", float("nan")), ("densified_yield", 0.5),
+                                         ("interlocking_friction", 0.5)])
 def test_bad_contact_effect_parameters_name_themselves(field, value):
     with pytest.raises(ValueError, match=field):
         pd.ContactLaw(**{field: value}).to_core()

@@ -117,10 +117,13 @@ class HystereticLaw {
     // would give back what they are given, at a few branches per contact.
     effects_ = !p.effects_off();
     k1_factor_ = effects_ ? ContactEffects::loading_stiffness_factor(p) : 1.0;
+    mu_ = p.mu * (effects_ ? ContactEffects::friction_factor(p) : 1.0);
   }
 
   const ContactLawParams& params() const { return p_; }
   double damping_factor() const { return damping_factor_; }
+  // The particle-particle friction coefficient of eq. 9 in force: mu times the effects' factor.
+  double mu() const { return mu_; }
   // True when the pair loop's four-lane kernel covers the pairs' law: unit stiffness scale and
   // no normal damping; the effects' hooks it calls lane by lane (effects_on).
   bool plain_pairs() const { return p_.plain_pairs(); }
@@ -223,6 +226,7 @@ class HystereticLaw {
   double damping_factor_ = 0.0;
   bool effects_ = false;    // some effect's row is off its default
   double k1_factor_ = 1.0;  // the effects' factor on k1 (loading_stiffness_factor)
+  double mu_ = 0.0;         // mu times the effects' factor on it (friction_factor)
 };
 
 }  // namespace pelletdem

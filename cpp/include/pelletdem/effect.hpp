@@ -31,6 +31,12 @@ struct ContactEffect {
   static double loading_stiffness_factor(const P&) {
     return 1.0;
   }
+  // Factor on the particle-particle friction coefficient mu (eq. 9; walls keep mu_wall),
+  // constant for the law: evaluated once, when the law is made.
+  template <class P>
+  static double friction_factor(const P&) {
+    return 1.0;
+  }
   // True when the effect makes the unloading stiffness depend on the contact's history (one
   // such effect at a time: its `residual` must solve for its own stiffness).
   template <class P>
@@ -109,6 +115,12 @@ struct EffectList {
   static double loading_stiffness_factor(const P& p) {
     double f = 1.0;
     ((f *= E::loading_stiffness_factor(p)), ...);
+    return f;
+  }
+  template <class P>
+  static double friction_factor(const P& p) {
+    double f = 1.0;
+    ((f *= E::friction_factor(p)), ...);
     return f;
   }
   template <class P>
