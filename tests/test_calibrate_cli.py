@@ -79,6 +79,9 @@ def _main(argv):
     (["--packings", "0"], "--packings", "1..64"),
     (["--packings", "65"], "--packings", "1..64"),
     (["--data", "example", "--packings", "1"], "--packings", "2..64"),
+    (["--first-packing", "-1"], "--first-packing", "0..1000000"),
+    (["--first-packing", "1000001"], "--first-packing", "0..1000000"),
+    (["--first-packing", "4", "--data", "example"], "--first-packing", "manifest"),
     (["--set", "contact.wood_density=500"], "contact.wood_density", "particle density"),
     (["--fit", "wood_density_yield=0.3:4"], "--fit", "contact.NAME=LO:HI"),
     (["--fit", "contact.wood_density_yield=4:0.3"], "--fit", "0 < LO < HI"),
@@ -169,17 +172,17 @@ def test_arguments_reach_the_calibration(no_calibration, monkeypatch, tmp_path):
     assert _main(["calibrate", out]) == 0
     (_, kw), = no_calibration
     assert kw["preset"] == "tiny" and kw["variants"] is None and kw["executor"] is None and kw["source"] is None
-    assert kw["packings"] == 1
+    assert kw["packings"] == 1 and kw["first_packing"] == 0
     no_calibration.clear()
-    assert _main(["calibrate", out, "--packings", "3"]) == 0
-    assert no_calibration[0][1]["packings"] == 3
+    assert _main(["calibrate", out, "--packings", "3", "--first-packing", "4"]) == 0
+    assert (no_calibration[0][1]["packings"], no_calibration[0][1]["first_packing"]) == (3, 4)
 
 
 def test_calibrate_help_lists_every_option(capsys):
     assert _main(["calibrate", "--help"]) == 0
     text = capsys.readouterr().out
     for opt in ("OUT_DIR", "--preset", "--variant", "--max-runs", "--compaction-runs", "--from", "--workers",
-                "--dask", "--set", "--fit", "--per-material", "--packings", "--data"):
+                "--dask", "--set", "--fit", "--per-material", "--packings", "--first-packing", "--data"):
         assert opt in text, opt
 
 
@@ -244,6 +247,33 @@ def test_calibrate_into_averages_packings_and_gives_each_wood_its_density(tmp_pa
         assert row.z_bd == pytest.approx((row.bd_sim - v.bd_pellet) / sd)
     with pytest.raises(ValueError, match="packings"):
         calibration_dir.calibrate_into(tmp_path / "bad", VARIANTS, "tiny", packings=0, runner=runner)
+
+
+def test_calibrate_into_runs_the_packings_from_first_packing(tmp_path):
+    """first_packing = 5 with two packings: every point averages seeds 5 and 6 (their
+    densities 50 and 60 above seed 0's), and calibration.json says so."""
+    from pelletdem.measured import variant
+
+    seeds = set()
+
+    def runner(spec):
+        seeds.add(spec.seed)
+        rec = power_law_runner(spec)
+        rec["outputs"]["bulk_density_relaxed"] += 10.0 * spec.seed
+        return rec
+
+    kw = dict(max_runs=2, compaction_runs=0, packings=2, executor="serial", runner=runner, log=lambda s: None)
+    first = calibration_dir.calibrate_into(tmp_path / "a", VARIANTS, "tiny", **kw)
+    assert seeds == {0, 1}
+    seeds.clear()
+    later = calibration_dir.calibrate_into(tmp_path / "b", VARIANTS, "tiny", first_packing=5, **kw)
+    assert seeds == {5, 6}
+    assert json.loads((tmp_path / "b" / "calibration.json").read_text())["first_packing"] == 5
+    scale = [variant(m, mc, sz).bd_wood / 680.0 for m, mc, sz in VARIANTS]
+    np.testing.assert_allclose(later.table["bd_sim"] - first.table["bd_sim"], [50.0 * f for f in scale])
+    for bad in (-1, 1_000_001, 2.0, True):
+        with pytest.raises(ValueError, match="first_packing"):
+            calibration_dir.calibrate_into(tmp_path / "bad", VARIANTS, "tiny", first_packing=bad, runner=runner)
 
 
 def test_each_variant_runs_at_its_own_moisture_content(tmp_path):

@@ -72,6 +72,10 @@ def add_arguments(p: argparse.ArgumentParser, *, preset: str = "tiny", max_runs:
     p.add_argument("--packings", type=int, default=None, metavar="N",
                    help=f"packings every point averages (the paper's variants: 1..64, default 1; "
                         f"with --data: 2..64, default {DATA_PACKINGS})")
+    p.add_argument("--first-packing", type=int, default=0, metavar="N",
+                   help="seed of the first packing: the points average packings N..N+P-1 (0..1000000, "
+                        "default 0); another set of packings shows how far a fit moves with the "
+                        "pellets' own scatter")
     p.add_argument("--fit", action="append", default=[], metavar="contact.NAME=LO:HI",
                    help="fit this contact-law row too, beside k1 in the shared compaction fit (a strength "
                         "of one sign, in log space of its magnitude; starts at its --set value), e.g. "
@@ -164,7 +168,7 @@ def parse_fit(items, settings, compaction_runs: int) -> dict:
 def check(args) -> dict:
     """The keyword arguments of :func:`pelletdem.calibration_dir.calibrate_into` for ``args``;
     ValueError naming the first bad argument and its allowed range, before any work."""
-    from .calibration_dir import load_calibration
+    from .calibration_dir import FIRST_PACKING_MAX, load_calibration
     from .law_settings import apply_settings, parse_settings
     from .laws import BondLaw
     from .loop_simulators import refuse_condition_rows
@@ -187,13 +191,15 @@ def check(args) -> dict:
                          "(--compaction-runs 1 or more, no --from)")
     if args.data is not None:
         for flag, given in (("--variant", args.variant), ("--from", args.source), ("--fit", args.fit),
-                            ("--per-material", args.per_material)):
+                            ("--per-material", args.per_material), ("--first-packing", args.first_packing)):
             if given:
                 raise ValueError(f"{flag} is for the paper's variants; with --data the manifest says what is fitted")
         if args.packings is not None and not 2 <= args.packings <= 64:
             raise ValueError(f"--packings = {args.packings} is out of range: allowed 2..64 with --data")
     elif args.packings is not None and not 1 <= args.packings <= 64:
         raise ValueError(f"--packings = {args.packings} is out of range: allowed 1..64")
+    if not 0 <= args.first_packing <= FIRST_PACKING_MAX:
+        raise ValueError(f"--first-packing = {args.first_packing} is out of range: allowed 0..{FIRST_PACKING_MAX}")
     refuse_condition_rows(settings, "--set")
     for name in settings:
         if name in FITTED:
@@ -234,7 +240,8 @@ def check(args) -> dict:
             raise ValueError("--dask needs Dask's distributed package, which is not installed: "
                              "pip install distributed")
     return dict(variants=variants, preset=args.preset or args.preset_default, max_runs=args.max_runs,
-                compaction_runs=args.compaction_runs, packings=args.packings or 1, source=args.source,
+                compaction_runs=args.compaction_runs, packings=args.packings or 1,
+                first_packing=args.first_packing, source=args.source,
                 settings=settings, fit=fit_rows, per_material=args.per_material, max_workers=args.workers)
 
 

@@ -33,6 +33,8 @@ __all__ = ["CALIBRATION_FILE", "Sittings", "load_calibration", "calibrate_into"]
 
 #: The file in OUT_DIR another calibration starts from (``source=``, ``--from``).
 CALIBRATION_FILE = "calibration.json"
+#: Largest seed of a calibration's first packing (``first_packing``).
+FIRST_PACKING_MAX = 1_000_000
 
 
 class Sittings:
@@ -99,7 +101,8 @@ def load_calibration(directory: Union[str, os.PathLike]) -> dict:
 
 
 def calibrate_into(out: Union[str, os.PathLike], variants=None, preset="tiny", *, max_runs: int = 4,
-                   compaction_runs: int = 2, packings: int = 1, source: Optional[Union[str, os.PathLike]] = None,
+                   compaction_runs: int = 2, packings: int = 1, first_packing: int = 0,
+                   source: Optional[Union[str, os.PathLike]] = None,
                    settings: Optional[Mapping[str, object]] = None,
                    fit: Optional[Mapping[str, Sequence[float]]] = None, per_material: bool = False, executor=None,
                    max_workers: Optional[int] = None, runner: Callable[[RunSpec], dict] = run_point,
@@ -109,8 +112,10 @@ def calibrate_into(out: Union[str, os.PathLike], variants=None, preset="tiny", *
     ``out`` (see the module docstring); the same call again resumes from ``out/cache``.
 
     ``max_runs``: parameter points per variant's bond fit (E_b, sigma_c = tau_c).
-    ``packings``: packings (seeds 0..packings-1) every point averages (1..64): a small pellet's
+    ``packings``: packings every point averages (1..64): a small pellet's
     own scatter is large, and more packings give the density its standard error.
+    ``first_packing``: the first packing's seed (0..FIRST_PACKING_MAX): packings
+    first_packing..first_packing+packings-1, so that a fit can be repeated on other pellets.
     ``compaction_runs``: k1 points of the shared compaction fit, within a factor 10 of the
     preset's k1 (0: keep the preset's). ``source``: the ``out`` of an earlier calibration,
     on a smaller preset: its contact law (k1, k2) and bond fits are used in place of the
@@ -132,6 +137,9 @@ def calibrate_into(out: Union[str, os.PathLike], variants=None, preset="tiny", *
 
     if isinstance(packings, bool) or not isinstance(packings, int) or not 1 <= packings <= 64:
         raise ValueError(f"packings = {packings!r}: allowed an integer 1..64")
+    if isinstance(first_packing, bool) or not isinstance(first_packing, int) \
+            or not 0 <= first_packing <= FIRST_PACKING_MAX:
+        raise ValueError(f"first_packing = {first_packing!r}: allowed an integer 0..{FIRST_PACKING_MAX}")
     if fit and (source is not None or not compaction_runs):
         raise ValueError("fit = {...} needs the compaction fit: compaction_runs >= 1 and no source")
     if per_material and (source is not None or not compaction_runs):
@@ -167,13 +175,15 @@ def calibrate_into(out: Union[str, os.PathLike], variants=None, preset="tiny", *
     out.mkdir(parents=True, exist_ok=True)
     sittings = Sittings(out)
     sittings.start()
-    report = calibrate_variants(vs, p, max_runs=max_runs, seeds=tuple(range(packings)), cache_dir=out / "cache",
+    seeds = tuple(range(first_packing, first_packing + packings))
+    report = calibrate_variants(vs, p, max_runs=max_runs, seeds=seeds, cache_dir=out / "cache",
                                 relaxed_dir=out / "relaxed",
                                 executor=executor, max_workers=max_workers, runner=runner, bond=bond, **setup)
     log(str(report))
     report.table.to_csv(out / "calibration.csv", index=False)
     (out / CALIBRATION_FILE).write_text(json.dumps({
-        "preset": p.name, "variants": [v.label for v in vs], "packings": packings, "set": settings,
+        "preset": p.name, "variants": [v.label for v in vs], "packings": packings, "first_packing": first_packing,
+        "set": settings,
         "fit": {k: list(v) for k, v in (fit or {}).items()},
         "per_material": per_material, "contact": report.contact, "contact_by_material": report.contact_by_material,
         "bond_start": report.bond_start(), "from": os.fspath(source) if source is not None else None,

@@ -8,7 +8,6 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from test_friction import assert_pair_slides_at, assert_wall_slides_at
 
 import pelletdem as pd
 from pelletdem import stages
@@ -16,6 +15,7 @@ from pelletdem.engine import BondLaw
 from pelletdem.pipeline import relaxed_pellet
 from pelletdem.presets import get_preset
 from pelletdem.runs import make_spec
+from test_friction import assert_pair_slides_at, assert_wall_slides_at
 
 
 def _interlocked(f, mu_wall=0.0, wall_stiffness_factor=1.0):
