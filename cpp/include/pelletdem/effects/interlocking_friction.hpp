@@ -10,8 +10,8 @@
 // pellet is that of the paper's law; the plates and the mould keep mu_wall.
 #include "pelletdem/effect.hpp"
 
-#define PELLETDEM_ROWS_InterlockingFriction(X)                                               \
-  X(double, interlocking_friction, 1.0, Range, 1.0, 100.0, "-", "interlocking_friction", true, \
+#define PELLETDEM_ROWS_InterlockingFriction(X)                                                  \
+  X(double, interlocking_friction, 1.0, Range, 1.0, 100.0, "-", "interlocking_friction", true,  \
     "F: mu of the made pellet's contacts over the loose sawdust's, from the bonding on (stage " \
     "'diametral'); 1 off")
 
