@@ -11,6 +11,7 @@ import pytest
 from test_hardening import _assert_loads_along, _assert_unloads_from_its_loading_line
 
 from pelletdem import stages
+from pelletdem.engine import BondLaw
 from pelletdem.pipeline import relaxed_pellet
 from pelletdem.presets import get_preset
 from pelletdem.runs import make_spec
@@ -47,24 +48,34 @@ def test_off_it_is_the_paper_line():
     _assert_loads_along(_densified(1.0), frictionless().k1, steps=500, rtol=1e-12)
 
 
-def test_one_relaxed_pellet_serves_every_densified_yield():
+def assert_one_relaxed_pellet_serves_every(field, value):
+    """A diametral-stage contact effect leaves the relaxed pellet's cache key as it is."""
     plain = make_spec({}, preset="tiny", diametral=False)
-    dense = make_spec({}, preset="tiny", diametral=False, contact={"densified_yield": 50.0})
-    assert dense.relax_key == plain.relax_key
+    on = make_spec({}, preset="tiny", diametral=False, contact={field: value})
+    assert on.relax_key == plain.relax_key
+
+
+def assert_kept_off_until_the_bonding(field, value):
+    """The relaxed pellet is the paper law's to the bit with ``field`` = ``value`` in the
+    preset's law; the bond stage puts it in force."""
+    base = get_preset("tiny")
+    off = getattr(base.contact, field)
+    law = replace(base.contact, **{field: value})
+    assert stages.compaction_law(law) == base.contact
+    got = {}
+    for name, preset in (("plain", base), ("on", replace(base, contact=law))):
+        pellet, _ = relaxed_pellet(preset, sigma_z=60e6, seed=3, n_particles=120, progress=False)
+        assert getattr(pellet.world.contact_law, field) == off
+        got[name] = np.array(pellet.world.x)
+        if name == "on":
+            stages.bond(pellet, BondLaw(), progress=False)
+            assert getattr(pellet.world.contact_law, field) == value
+    np.testing.assert_array_equal(got["on"], got["plain"])
+
+
+def test_one_relaxed_pellet_serves_every_densified_yield():
+    assert_one_relaxed_pellet_serves_every("densified_yield", 50.0)
 
 
 def test_the_stages_keep_it_off_until_the_bonding():
-    """The relaxed pellet is the paper law's to the bit; the bond stage puts Y in force."""
-    base = get_preset("tiny")
-    law = replace(base.contact, densified_yield=50.0)
-    assert stages.compaction_law(law) == base.contact
-    got = {}
-    for name, preset in (("plain", base), ("dense", replace(base, contact=law))):
-        pellet, _ = relaxed_pellet(preset, sigma_z=60e6, seed=3, n_particles=120, progress=False)
-        assert pellet.world.contact_law.densified_yield == 1.0
-        got[name] = np.array(pellet.world.x)
-        if name == "dense":
-            from pelletdem.engine import BondLaw
-            stages.bond(pellet, BondLaw(), progress=False)
-            assert pellet.world.contact_law.densified_yield == 50.0
-    np.testing.assert_array_equal(got["dense"], got["plain"])
+    assert_kept_off_until_the_bonding("densified_yield", 50.0)

@@ -4,17 +4,10 @@ wall still slides at mu_wall f_n; the stages keep it off from fill to relaxation
 relaxed pellet serves every F, and put it in force for the test."""
 from __future__ import annotations
 
-from dataclasses import replace
-
-import numpy as np
 import pytest
+from test_densified_yield import assert_kept_off_until_the_bonding, assert_one_relaxed_pellet_serves_every
 
 import pelletdem as pd
-from pelletdem import stages
-from pelletdem.engine import BondLaw
-from pelletdem.pipeline import relaxed_pellet
-from pelletdem.presets import get_preset
-from pelletdem.runs import make_spec
 from test_friction import assert_pair_slides_at, assert_wall_slides_at
 
 
@@ -35,22 +28,8 @@ def test_a_wall_keeps_mu_wall():
 
 
 def test_one_relaxed_pellet_serves_every_interlocking_friction():
-    plain = make_spec({}, preset="tiny", diametral=False)
-    locked = make_spec({}, preset="tiny", diametral=False, contact={"interlocking_friction": 3.0})
-    assert locked.relax_key == plain.relax_key
+    assert_one_relaxed_pellet_serves_every("interlocking_friction", 3.0)
 
 
 def test_the_stages_keep_it_off_until_the_bonding():
-    """The relaxed pellet is the paper law's to the bit; the bond stage puts F in force."""
-    base = get_preset("tiny")
-    law = replace(base.contact, interlocking_friction=3.0)
-    assert stages.compaction_law(law) == base.contact
-    got = {}
-    for name, preset in (("plain", base), ("locked", replace(base, contact=law))):
-        pellet, _ = relaxed_pellet(preset, sigma_z=60e6, seed=3, n_particles=120, progress=False)
-        assert pellet.world.contact_law.interlocking_friction == 1.0
-        got[name] = np.array(pellet.world.x)
-        if name == "locked":
-            stages.bond(pellet, BondLaw(), progress=False)
-            assert pellet.world.contact_law.interlocking_friction == 3.0
-    np.testing.assert_array_equal(got["locked"], got["plain"])
+    assert_kept_off_until_the_bonding("interlocking_friction", 3.0)
