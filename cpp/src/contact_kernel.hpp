@@ -22,9 +22,8 @@ PELLETDEM_INLINE double rolling_moment(double m_r, double fn, double r) {
 // The contact force of eq. 5-10 of the touching pair (i, j) with kinematics g and history h;
 // the pair counts in the loop's statistics.
 PELLETDEM_INLINE ContactForce contact_force(Index i, Index j, ContactHistory& h, const PairGeometry& g,
-                                            const Particles& p, const HystereticLaw& law,
-                                            const ContactLawParams& cp, double dt_inc, double adh,
-                                            PairStats& out) {
+                                            const Particles& p, const HystereticLaw& law, double dt_inc,
+                                            double adh, PairStats& out) {
   const double ri = p.r[i], rj = p.r[j];
   ContactKinematics c{g.delta, g.vn, g.vt, g.n, ri * rj / (ri + rj), p.m[i] * p.m[j] / (p.m[i] + p.m[j])};
   const ContactForce cf = law.evaluate(c, h, dt_inc, law.mu(), adh);
@@ -42,7 +41,7 @@ PELLETDEM_INLINE void contact_one(Index i, Index j, ContactHistory& h, const Par
                                   const HystereticLaw& law, const ContactLawParams& cp, double dt_inc,
                                   double adh, const Motion* mo, Load* A, PairStats& out) {
   const PairGeometry g = pair_geometry(i, j, p, mo);
-  const ContactForce cf = contact_force(i, j, h, g, p, law, cp, dt_inc, adh, out);
+  const ContactForce cf = contact_force(i, j, h, g, p, law, dt_inc, adh, out);
   const Vec3 fj = cf.fn * g.n + cf.ft;
   A[j].f += fj;
   A[i].f -= fj;
@@ -60,7 +59,7 @@ PELLETDEM_INLINE bool bonded_one(Index i, Index j, bool on, ContactHistory& h, B
                                  double adh, const Motion* mo, Load* A, PairStats& out) {
   const PairGeometry g = pair_geometry(i, j, p, mo);
   const ContactForce cf =
-      on ? contact_force(i, j, h, g, p, law, cp, dt_inc, adh, out) : ContactForce{0.0, Vec3::Zero()};
+      on ? contact_force(i, j, h, g, p, law, dt_inc, adh, out) : ContactForce{0.0, Vec3::Zero()};
   BondLoad bl;
   const bool broke = bond_one(b, g, dt_inc, bl);
   if (broke) bl = BondLoad{0.0, Vec3::Zero(), Vec3::Zero()};
@@ -79,8 +78,7 @@ PELLETDEM_INLINE bool bonded_one(Index i, Index j, bool on, ContactHistory& h, B
 // law's, lane by lane. Out: the normal force fn, the tangential
 // force ft and the new history (delta0, hft).
 PELLETDEM_INLINE void contact_law_lanes(const PairLanes& q, const L4& hist, const HystereticLaw& law,
-                                        const ContactLawParams& cp, double dt_inc, double adh, Lane& fn,
-                                        L3& ft, Lane& delta0, L3& hft) {
+                                        double dt_inc, double adh, Lane& fn, L3& ft, Lane& delta0, L3& hft) {
   const L3& nv = q.n;
   const Lane delta = q.delta;
   const L3& vt = q.vt;
@@ -167,7 +165,7 @@ PELLETDEM_INLINE void contact_group(const Index* gi, const Index* gj, ContactHis
   const L4 hist = load_run(gh, 0);
   Lane fn, delta0;
   L3 ft, hft;
-  contact_law_lanes(q, hist, law, cp, dt_inc, adh, fn, ft, delta0, hft);
+  contact_law_lanes(q, hist, law, dt_inc, adh, fn, ft, delta0, hft);
   store_run(gh, 0, delta0, hft.x, hft.y, hft.z);
   const L3& nv = q.n;
   const L3 fj{fn * nv.x + ft.x, fn * nv.y + ft.y, fn * nv.z + ft.z};
@@ -198,7 +196,7 @@ PELLETDEM_INLINE bool bonded_group(const Index* gi, const Index* gj, ContactHist
     const L4 hist = load_run(gh, 0);
     Lane delta0;
     L3 hft;
-    contact_law_lanes(q, hist, law, cp, dt_inc, adh, fn, ft, delta0, hft);
+    contact_law_lanes(q, hist, law, dt_inc, adh, fn, ft, delta0, hft);
     if (touching != (1u << kLanes) - 1) {
       // A pair apart has no contact force, and keeps its (cleared) history.
       fn = lane_select(on, fn, Lane{});
