@@ -451,6 +451,11 @@ def test_calibrate_into_from_k1_per_material_runs_each_wood_with_the_set_k2(tmp_
                                    source=src, settings={"contact.k2": 6e4}, executor="serial", runner=runner,
                                    log=lambda s: None)
     assert set(seen) == {(1.5e4, 6e4), (7e3, 6e4)}
+    seen.clear()  # a source calibrated on more woods than the variants passes on their woods' rows
+    rep = calibration_dir.calibrate_into(tmp_path / "oak", [("oak", 8, 120)], "tiny", max_runs=1, source=src,
+                                         settings={"contact.k2": 6e4}, executor="serial", runner=runner,
+                                         log=lambda s: None)
+    assert set(seen) == {(1.5e4, 6e4)} and set(rep.contact_by_material) == {"oak"}
     (src / "calibration.json").write_text(json.dumps({"contact": {"no_such_row": 1.0}, "bond_start": {}}))
     with pytest.raises(ValueError, match="its contact law is refused.*no_such_row"):
         calibration_dir.calibrate_into(tmp_path / "bad", [("oak", 8, 120)], "tiny", max_runs=1, source=src,

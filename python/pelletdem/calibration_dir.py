@@ -126,7 +126,7 @@ def calibrate_into(out: Union[str, os.PathLike], variants=None, preset="tiny", *
     compaction fit, each of one sign, in log space of its magnitude (``contact.k1`` in k1's
     place: k1 fitted with k2 kept). ``per_material``: that fit runs per material, on its own
     densities (k1 a material parameter; calibration.json's ``contact_by_material``, which
-    ``source`` passes on). ``executor``,
+    ``source`` passes on for the variants' woods). ``executor``,
     ``max_workers``, ``runner``: as in ``calibrate_variants`` (a Dask ``distributed.Client``
     is an executor). ``log``: where the report's text goes. The preset runs with the paper's
     overlap guard (:func:`pelletdem.loop_paper.paper_preset`), as the loop's paper variants
@@ -147,22 +147,25 @@ def calibrate_into(out: Union[str, os.PathLike], variants=None, preset="tiny", *
     p = paper_preset(preset)
     settings = dict(settings or {})
     src = load_calibration(source) if source is not None else None
-    base = p.contact
+    vs = as_variants(variants)
+    base, by_material = p.contact, {}
     if src is not None:
+        # a source calibrated on more woods than these variants passes on their woods' rows
+        materials = {v.material for v in vs}
+        by_material = {m: r for m, r in (src.get("contact_by_material") or {}).items() if m in materials}
         # the settings go on the law they run with: the source's, with its first material's
         # rows where it has k1 per material (that k1 may be below the preset's, and a set k2
         # then below the preset's k1); calibrate_variants puts each material's own in force
-        rows = next(iter((src.get("contact_by_material") or {}).values()), {})
+        rows = next(iter(by_material.values()), {})
         try:
             base = dataclasses.replace(p.contact, **{**src["contact"], **rows})
         except TypeError as e:  # a row the contact law does not have
             raise ValueError(f"source = {os.fspath(source)!r}: its contact law is refused: {e}") from None
     contact, bond = apply_settings(base, BondLaw(), settings)
     p = p.with_(contact=contact)
-    vs = as_variants(variants)
     if src is not None:
         setup = dict(compaction=None, contact=src["contact"], start=src["bond_start"],
-                     contact_by_material=src.get("contact_by_material") or None)
+                     contact_by_material=by_material or None)
     elif compaction_runs:
         k1 = p.contact.k1
         # contact.k1 fits k1 with k2 kept; plain k1 keeps k2 / k1 (eq. 8's restitution)
