@@ -3,6 +3,8 @@ recovered from the engine's own data, a run through a Dask cluster, the relaxed 
 bit for bit from its checkpoint, and branches that keep their own diametral settings. The
 machinery itself is tested on a fast stand-in in test_calibrate.py.
 """
+import dataclasses
+import json
 import time
 
 import pytest
@@ -99,6 +101,53 @@ def test_calibrate_variants_relaxes_each_pellet_once_before_the_fits(tmp_path):
     assert rep.n_relaxations == 1
     assert rep.n_simulations == 3  # the density run and one point per variant
     assert len(list((tmp_path / "relaxed").glob("*.h5"))) == 1
+
+
+def test_a_run_with_a_ladder_relaxes_the_lower_pressures_pellets_from_its_stroke(tmp_path):
+    """A compaction run at 120 MPa with ladder (60 MPa,) and a relaxed_dir leaves both pellets
+    there; the 60 MPa run then loads its own and records what a run that compacted to 60 MPa
+    itself records. Without a relaxed_dir the ladder has nowhere to go and is not run."""
+    top = C.make_spec({}, preset="tiny", sigma_z=120e6, seed=1, diametral=False)
+    low = C.make_spec({}, preset="tiny", sigma_z=60e6, seed=1, diametral=False)
+    C.clear_memo()
+    rec = C.run_point(dataclasses.replace(top, ladder=(60e6,)), relaxed_dir=tmp_path)
+    assert rec["ok"] and rec["relaxations"] == 2 and rec["key"] == top.key
+    assert {p.name for p in tmp_path.glob("*.h5")} == {f"{top.relax_key}.h5", f"{low.relax_key}.h5"}
+    C.clear_memo()
+    loaded = C.run_point(low, relaxed_dir=tmp_path)
+    assert loaded["relaxed_from"] == "disk" and loaded["relaxations"] == 0
+    C.clear_memo()
+    own = C.run_point(low)
+    assert own["relaxations"] == 1
+    assert loaded["outputs"] == own["outputs"] and loaded["compaction_curve"] == own["compaction_curve"]
+    C.clear_memo()
+    assert C.run_point(dataclasses.replace(top, ladder=(60e6,)))["relaxations"] == 1
+
+
+def _compactions(cache_dir):
+    """{sigma_z (Pa): (relaxed_from, relaxations)} of the compaction runs in a run cache."""
+    records = [json.loads(p.read_text()) for p in cache_dir.rglob("*.json")]
+    return {r["spec"]["sigma_z"]: (r["relaxed_from"], r["relaxations"]) for r in records
+            if r["spec"]["kind"] == "compaction"}
+
+
+def test_calibrate_variants_relaxes_both_pressures_from_one_stroke(tmp_path):
+    """With a relaxed_dir and at least as many strokes (laws x packings) as workers, one
+    stroke per packing relaxes the 60 and the 120 MPa pellet; the table is the one of a
+    calibration without a relaxed_dir (each pressure compacted on its own). With more workers
+    than strokes the pressures compact side by side, each on its own."""
+    two = [("oak", 8, 60), ("oak", 8, 120)]
+    kw = dict(compaction=None, max_runs=1)
+    rep = C.calibrate_variants(two, "tiny", cache_dir=tmp_path / "cache", relaxed_dir=tmp_path / "relaxed",
+                               max_workers=1, **kw)
+    assert rep.n_relaxations == 2 and rep.n_simulations == 4  # 2 density runs, 1 point per variant
+    assert _compactions(tmp_path / "cache") == {60e6: ("disk", 0), 120e6: ("", 2)}
+    apart = C.calibrate_variants(two, "tiny", cache_dir=tmp_path / "apart", max_workers=1, **kw)
+    assert apart.table.equals(rep.table)
+    wide = C.calibrate_variants(two, "tiny", cache_dir=tmp_path / "wide", relaxed_dir=tmp_path / "wide_relaxed",
+                                max_workers=2, **kw)
+    assert _compactions(tmp_path / "wide") == {60e6: ("", 1), 120e6: ("", 1)}
+    assert wide.table.equals(rep.table)
 
 
 def test_calibrate_variants_puts_back_a_missing_relaxed_pellet_once(tmp_path):

@@ -3,6 +3,7 @@ level, outside ``if __name__ == "__main__":``, is told so before any worker star
 script with the guard runs."""
 from __future__ import annotations
 
+import dataclasses
 import re
 import subprocess
 import sys
@@ -93,11 +94,21 @@ def test_workers_end_when_their_driver_is_killed(tmp_path):
         p.kill()
 
 
+@dataclasses.dataclass(frozen=True)
 class _Spec:
-    """A run with only what the Evaluator reads: its key and its relaxed pellet's key."""
+    """A run with only what the Evaluator reads: its key, its relaxed pellet's key, the key of
+    the piston stroke that pellet comes from (its own unless given), its pressure (Pa) and
+    the lower pressures it is asked to relax on the way."""
 
-    def __init__(self, key: str, relax_key: str):
-        self.key, self.relax_key = key, relax_key
+    key: str
+    relax_key: str
+    stroke: str = ""
+    sigma_z: float = 120e6
+    ladder: tuple = ()
+
+    @property
+    def stroke_key(self) -> str:
+        return self.stroke or self.relax_key
 
 
 def _timed_runner(log, lock, together=None):
@@ -160,3 +171,48 @@ def test_runs_of_one_relaxed_pellet_go_out_together_where_workers_do_not_share_p
     with cf.ThreadPoolExecutor(2) as ex:
         Evaluator(RunCache(), ex, _timed_runner(log, lock, together)).run_all(specs)
     assert together == [True, True] and len(log) == 4  # two runs of the one pellet at once
+
+
+def _stroke_runs(workers: int):
+    """Two strokes (packings), each with a 60 and a 120 MPa pellet, on ``workers`` threads:
+    {(stroke, sigma_z): (ladder, start, end)}."""
+    import concurrent.futures as cf
+    import threading
+    import time
+
+    from pelletdem.execution import Evaluator
+    from pelletdem.run_cache import RunCache
+
+    specs = [_Spec(f"k{s}{sz:g}", f"r{s}{sz:g}", f"s{s}", sz) for s in range(2) for sz in (60e6, 120e6)]
+    log, lock = {}, threading.Lock()
+
+    def run(spec):
+        t0 = time.perf_counter()
+        time.sleep(0.3)
+        with lock:
+            log[(spec.stroke, spec.sigma_z)] = (spec.ladder, t0, time.perf_counter())
+        return {"key": spec.key, "ok": True, "relaxed_reused": False, "wall_time_s": 0.0}
+
+    with cf.ThreadPoolExecutor(workers) as ex:
+        recs = Evaluator(RunCache(), ex, run, relaxed_shared=True).run_all(specs)
+    assert [r["key"] for r in recs] == [s.key for s in specs]
+    return log
+
+
+def test_pellets_of_one_stroke_come_from_it_where_strokes_are_as_many_as_the_workers():
+    """The 120 MPa run of each stroke goes first with the lower pressure as its ladder; the
+    60 MPa run starts once it has ended (and then loads its pellet)."""
+    log = _stroke_runs(workers=2)
+    for s in ("s0", "s1"):
+        (top_ladder, _, top_end), (low_ladder, low_start, _) = log[(s, 120e6)], log[(s, 60e6)]
+        assert top_ladder == (60e6,) and low_ladder == ()
+        assert low_start >= top_end
+
+
+def test_pellets_of_one_stroke_compact_side_by_side_where_the_workers_are_more():
+    """With more workers than strokes a stroke would keep workers waiting: no ladder, every
+    run at once."""
+    log = _stroke_runs(workers=4)
+    assert all(ladder == () for ladder, _, _ in log.values())
+    starts, ends = [t0 for _, t0, _ in log.values()], [t1 for _, _, t1 in log.values()]
+    assert max(starts) < min(ends)

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import concurrent.futures as cf
 import contextlib
+import dataclasses
 import multiprocessing
 import os
 import queue
@@ -28,7 +29,7 @@ from .run_cache import RunCache
 from .runs import RunSpec, canonical
 from .worker import run_point
 
-__all__ = ["open_executor", "with_relaxed_dir", "Evaluator", "unguarded_main_line", "check_main_guard"]
+__all__ = ["open_executor", "worker_count", "with_relaxed_dir", "Evaluator", "unguarded_main_line", "check_main_guard"]
 
 
 #: How often (s) a worker looks whether the process that started it is still there.
@@ -257,6 +258,16 @@ def open_executor(executor, max_workers: Optional[int]):
                          "or a distributed.Client")
 
 
+def worker_count(ex) -> Optional[int]:
+    """How many runs the executor ``ex`` (from :func:`open_executor`) runs at once: a process
+    pool's workers, 1 for 'serial'; None where it is not known (a Dask cluster grows and
+    shrinks)."""
+    if isinstance(ex, _SerialExecutor):
+        return 1
+    n = getattr(ex, "_max_workers", None)
+    return n if isinstance(n, int) and n >= 1 else None
+
+
 def with_relaxed_dir(runner, relaxed_dir):
     """``runner`` as it is run: :func:`pelletdem.worker.run_point` bound to ``relaxed_dir``
     (a directory, created here, for relaxed-pellet checkpoints; a picklable partial) when
@@ -353,7 +364,7 @@ class Evaluator:
         except Exception as e:  # noqa: BLE001 (a full disk must not lose the result)
             warnings.warn(f"could not write cache record {key}: {e}", stacklevel=2)
         with self._lock:
-            self.n_relaxations += 0 if rec.get("relaxed_reused") else 1
+            self.n_relaxations += int(rec.get("relaxations", 0 if rec.get("relaxed_reused") else 1))
             self.sim_time_s += float(rec.get("wall_time_s", 0.0))
         _set(out, result=dict(rec, cached=False, attempts=len(errors) + 1))
 
@@ -382,7 +393,10 @@ class Evaluator:
         With ``relaxed_shared`` (the workers reach one ``relaxed_dir``) only the first run of
         each relaxed pellet is submitted at once, and the rest of its group once that run is
         done: two idle workers handed two runs of one pellet would each compact it, and a
-        design whose points share relaxed pellets would save nothing."""
+        design whose points share relaxed pellets would save nothing. Pellets that differ only
+        in sigma_z come from one piston stroke (``RunSpec.ladder``: the highest pressure's run
+        relaxes the lower ones' pellets on the way, and their runs wait for it) where the
+        strokes are at least as many as the workers; with fewer, the workers would wait."""
         order = sorted(range(len(specs)), key=lambda i: (specs[i].relax_key, i))
         if not self.relaxed_shared:
             futs = {i: self.submit(specs[i]) for i in order}
@@ -390,16 +404,36 @@ class Evaluator:
         groups: Dict[str, List[int]] = {}
         for i in order:
             groups.setdefault(specs[i].relax_key, []).append(i)
+        strokes: Dict[str, List[str]] = {}
+        for key, members in groups.items():
+            strokes.setdefault(specs[members[0]].stroke_key, []).append(key)
+        workers = worker_count(self.executor)
+        ladder = workers is not None and len(strokes) >= workers
+        first, after = [], {}  # (relax key, ladder) to submit now; stroke top -> its lower keys
+        for keys in strokes.values():
+            keys.sort(key=lambda k: specs[groups[k][0]].sigma_z)
+            if ladder and len(keys) > 1:
+                after[keys[-1]] = keys[:-1]
+                first.append((keys[-1], tuple(specs[groups[k][0]].sigma_z for k in keys[:-1])))
+            else:
+                first.extend((k, ()) for k in keys)
         # every submission from this thread: an executor's own callback thread may not submit
         ready: "queue.Queue[str]" = queue.Queue()
         futs: Dict[int, cf.Future] = {}
+
+        def start(key: str, lower=()) -> None:
+            i = groups[key][0]
+            futs[i] = self.submit(dataclasses.replace(specs[i], ladder=lower) if lower else specs[i])
+            futs[i].add_done_callback(lambda _, key=key: ready.put(key))
         try:
-            for key, members in groups.items():
-                futs[members[0]] = self.submit(specs[members[0]])
-                futs[members[0]].add_done_callback(lambda _, key=key: ready.put(key))
+            for key, lower in first:
+                start(key, lower)
             for _ in range(len(groups)):
-                for i in groups[ready.get()][1:]:  # the rest of a group, once its pellet is relaxed
+                key = ready.get()
+                for i in groups[key][1:]:  # the rest of a group, once its pellet is relaxed
                     futs[i] = self.submit(specs[i])
+                for k in after.pop(key, []):  # a stroke's lower pressures, once it is done
+                    start(k)
         except BaseException:
             for f in futs.values():
                 f.cancel()

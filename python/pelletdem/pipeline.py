@@ -1,6 +1,7 @@
 """A whole pellet's life in one call: fill -> compact -> unload -> demould -> relax -> bond ->
 diametral, returning one Result. `relaxed_pellet` and `break_pellet` split it where the
-calibration branches: everything before bonding does not depend on the bond parameters."""
+calibration branches: everything before bonding does not depend on the bond parameters, and
+`relaxed_pellets` relaxes the pellets of several pressures from one piston stroke."""
 from __future__ import annotations
 
 import time
@@ -32,19 +33,31 @@ def relaxed_pellet(preset="quick", sigma_z: float = 120e6, seed: int = 0, thread
                    n_particles: Optional[int] = None, progress: Optional[bool] = None):
     """Fill, compact to `sigma_z` (Pa), unload, demould and relax. Returns (Pellet, Result)
     with the stages so far; the Pellet's world can be cloned to branch bond-parameter runs."""
+    return relaxed_pellets(preset, [sigma_z], seed, threads, n_particles, progress)[0]
+
+
+def relaxed_pellets(preset="quick", sigma_zs=(60e6, 120e6), seed: int = 0, threads: int = 1,
+                    n_particles: Optional[int] = None, progress: Optional[bool] = None):
+    """:func:`relaxed_pellet` at each of the pressures `sigma_zs` (Pa, ascending) from one bed
+    and one piston stroke (:func:`pelletdem.stages.compact_through`): each pellet is bit for
+    bit the one relaxed_pellet gives, and the strokes to the lower pressures are not run.
+    Returns [(Pellet, Result)] in the order of `sigma_zs`."""
     p = _preset(preset)
     if not isinstance(threads, int) or not 1 <= threads <= 1024:
         raise ParameterError(f"threads = {threads!r} is out of range: allowed 1 <= threads <= 1024")
-    stages.check_sigma_z(sigma_z)  # before the fill, not after it
-    res = Result(params={"preset": asdict(p), "sigma_z": sigma_z, "threads": threads,
-                         "n_particles": n_particles}, seed=seed, version=__version__)
-    pellet, st = stages.fill(p, seed=seed, threads=threads, n_particles=n_particles, progress=progress)
-    res.stages["fill"] = st
-    for st in (stages.compact(pellet, sigma_z, progress=progress), stages.unload(pellet, progress=progress),
-               stages.demould(pellet, progress=progress), stages.relax(pellet, progress=progress)):
-        res.stages[st.name] = st
-    res.snapshots.update(pellet.snapshots)
-    return pellet, res
+    sigma_zs = stages.check_sigma_zs(sigma_zs)  # before the fill, not after it
+    pellet, filled = stages.fill(p, seed=seed, threads=threads, n_particles=n_particles, progress=progress)
+    out = []
+    for (pe, compacted), sigma_z in zip(stages.compact_through(pellet, sigma_zs, progress=progress), sigma_zs):
+        res = Result(params={"preset": asdict(p), "sigma_z": sigma_z, "threads": threads,
+                             "n_particles": n_particles}, seed=seed, version=__version__)
+        res.stages["fill"], res.stages["compact"] = filled, compacted
+        for st in (stages.unload(pe, progress=progress), stages.demould(pe, progress=progress),
+                   stages.relax(pe, progress=progress)):
+            res.stages[st.name] = st
+        res.snapshots.update(pe.snapshots)
+        out.append((pe, res))
+    return out
 
 
 def break_pellet(pellet, bond_law: BondLaw, result: Optional[Result] = None,

@@ -27,7 +27,7 @@ import hashlib
 import json
 import math
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Dict, Iterable, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
@@ -138,6 +138,10 @@ class RunSpec:
     sigma_z: float
     seed: int = 0
     bond: Optional[BondLaw] = None
+    #: Lower pressures (Pa) whose relaxed pellets this run makes from its own piston stroke
+    #: when it relaxes its pellet, for a ``relaxed_dir`` to keep (the worker's ``ladder``).
+    #: Not an input of the run's result: not in its key.
+    ladder: Tuple[float, ...] = field(default=(), compare=False)
 
     @property
     def kind(self) -> str:
@@ -174,6 +178,12 @@ class RunSpec:
     def relax_key(self) -> str:
         """Key of the relaxed pellet this run starts from (shared by all bond laws)."""
         return _digest(self.relax_payload())
+
+    @property
+    def stroke_key(self) -> str:
+        """Key of the piston stroke this run's pellet comes from: shared by the runs that
+        differ only in sigma_z (one stroke can relax all their pellets, ``ladder``)."""
+        return _digest({**self.relax_payload(), "sigma_z": None})
 
 
 def _after_relax_contact(contact) -> Tuple[str, ...]:

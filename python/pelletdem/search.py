@@ -125,8 +125,11 @@ class _Problem:
 
     def evaluate(self, params: Mapping[str, float], ev: Evaluator) -> _Point:
         groups = self.specs(params)
-        futs = [[ev.submit(s) for s in g] for g in groups]
-        recs = [[f.result() for f in g] for g in futs]
+        flat = ev.run_all([s for g in groups for s in g])
+        recs, k = [], 0
+        for g in groups:
+            recs.append(flat[k:k + len(g)])
+            k += len(g)
         scores, outputs, res, wts, names, slopes, censored = [], [], [], [], [], [], []
         ok, err = True, ""
         for t, rs in zip(self.targets, recs):

@@ -12,7 +12,7 @@ import contextvars
 import math
 import time
 from dataclasses import dataclass, field, replace
-from typing import Dict, Optional
+from typing import Dict, List, Optional, Tuple
 
 import numpy as np
 
@@ -137,6 +137,20 @@ def check_sigma_z(sigma_z) -> float:
     if v > 1e9:
         raise ParameterError(f"sigma_z = {v} Pa is out of range: allowed 0 < sigma_z <= 1e9 Pa")
     return v
+
+
+def check_sigma_zs(sigma_zs) -> List[float]:
+    """Compaction pressures (Pa) as a list if there is at least one, each allowed by
+    :func:`check_sigma_z`, in ascending order; ParameterError if not."""
+    try:
+        given = list(sigma_zs)
+    except TypeError:
+        raise ParameterError(f"sigma_zs = {sigma_zs!r}: give a list of pressures (Pa)") from None
+    targets = [check_sigma_z(sz) for sz in given]
+    if not targets or any(b <= a for a, b in zip(targets, targets[1:])):
+        raise ParameterError(f"sigma_zs = {given!r}: give one or more pressures in (0, 1e9] Pa, "
+                             "each above the one before (ascending)")
+    return targets
 
 
 def calm(world) -> float:
@@ -313,8 +327,21 @@ def compact(pellet: Pellet, sigma_z: float, speed: Optional[float] = None,
     Records sigma_z against dh/h0, bulk density against sigma_z, coordination number against
     density, the inertia number, and the largest overlap ratio seen (particles and walls).
     """
+    return compact_through(pellet, [sigma_z], speed, progress)[0][1]
+
+
+def compact_through(pellet: Pellet, sigma_zs, speed: Optional[float] = None,
+                    progress: Optional[bool] = None) -> List[Tuple[Pellet, StageResult]]:
+    """One piston stroke through the pressures `sigma_zs` (Pa, ascending): at each but the
+    last the pellet is cloned and the clone's compaction ends there; `pellet` goes on to the
+    last. Returns [(pellet at sigma_z, its :func:`compact` StageResult)] in the order given.
+
+    A compaction to a higher pressure passes through every lower one, and the engine steps
+    the same whether a run stops and goes on or not, so each clone is bit for bit the pellet
+    that :func:`compact` to its pressure gives, for the cost of one stroke.
+    """
     t0 = time.perf_counter()
-    check_sigma_z(sigma_z)
+    targets = check_sigma_zs(sigma_zs)
     v = _check_positive("speed", pellet.preset.piston_speed if speed is None else speed, "m/s")
     w, pid = pellet.world, pellet.walls["piston"]
     area = math.pi * pellet.mould_radius**2
@@ -322,13 +349,26 @@ def compact(pellet: Pellet, sigma_z: float, speed: Optional[float] = None,
     _sample_every(pellet, 0.6 * max_steps)
     w.reset_max_overlap_seen()
     w.set_wall_velocity(pid, (0.0, 0.0, -v))
-    out = _run(pellet, "compact", max_steps, progress, wall_force_above=(pid, sigma_z * area))
+    out, steps = [], 0
+    for i, sigma_z in enumerate(targets):
+        run = _run(pellet, "compact", max_steps - steps, progress, wall_force_above=(pid, sigma_z * area))
+        steps += run.steps
+        last = i == len(targets) - 1
+        here = pellet if last else replace(pellet, world=w.clone(), walls=dict(pellet.walls),
+                                           snapshots=dict(pellet.snapshots))
+        out.append((here, _compaction_done(here, sigma_z, v, run.reason == "wall_force_above", steps, t0)))
+    return out
+
+
+def _compaction_done(pellet: Pellet, sigma_z: float, v: float, reached: bool, steps: int, t0: float) -> StageResult:
+    """Stop the piston of `pellet` at `sigma_z` (Pa) and measure its compaction stage."""
+    w, pid = pellet.world, pellet.walls["piston"]
+    area = math.pi * pellet.mould_radius**2
     w.set_wall_velocity(pid, (0.0, 0.0, 0.0))
     w.record_sample()
     s = _piston_series(pellet)
     scaled_density = pellet.preset.density * pellet.preset.density_scale
     s["inertia_number"] = inertia_number(v / s["h"], 2 * pellet.preset.radius_mean, scaled_density, s["sigma_z"])
-    reached = out.reason == "wall_force_above"
     pellet.snapshot("compact")
     return StageResult("compact", series=s, scalars={
         "sigma_z_target": sigma_z, "sigma_z_reached": float(w.wall_state(pid)["normal_force"] / area),
@@ -337,7 +377,7 @@ def compact(pellet: Pellet, sigma_z: float, speed: Optional[float] = None,
         "coordination_number_max": float(w.coordination_number()),
         "max_overlap_ratio": float(w.max_overlap_ratio_seen), "piston_speed": v,
         "inertia_number_at_target": float(s["inertia_number"][-1])},
-        wall_time_s=time.perf_counter() - t0, steps=out.steps)
+        wall_time_s=time.perf_counter() - t0, steps=steps)
 
 
 def unload(pellet: Pellet, speed: Optional[float] = None, progress: Optional[bool] = None) -> StageResult:

@@ -18,6 +18,7 @@ import concurrent.futures as cf
 import dataclasses
 import math
 import os
+import threading
 import time
 from dataclasses import dataclass, field
 from typing import Any, Callable, Dict, Mapping, Optional, Sequence, Union
@@ -25,7 +26,7 @@ from typing import Any, Callable, Dict, Mapping, Optional, Sequence, Union
 import numpy as np
 
 from .engine import BondLaw, k1_from_yield_strength
-from .execution import Evaluator, open_executor, with_relaxed_dir
+from .execution import Evaluator, open_executor, with_relaxed_dir, worker_count
 from .objectives import Targets, as_variants, compaction_targets, mean_outputs
 from .run_cache import RunCache
 from .runs import RunSpec, as_preset, bound_signs, make_spec, parse_bounds, run_setup
@@ -165,7 +166,9 @@ def calibrate_variants(variants=None, preset="tiny", *,
        The 12 fits run concurrently on one executor (default a process pool of
        ``max_workers``). Before them, one compaction-only run per pressure (and seed) relaxes
        each pellet once, in parallel; the fits branch off those pellets (a worker that does
-       not hold one loads it from ``relaxed_dir`` when given, else relaxes it itself).
+       not hold one loads it from ``relaxed_dir`` when given, else relaxes it itself). With
+       ``relaxed_dir`` and at least as many laws x seeds as workers, one piston stroke per law
+       and seed relaxes the pellets of all its pressures (``RunSpec.ladder``).
 
     Each variant's moisture content (%) is its contact law's ``moisture_content``, which the
     moisture effects (``contact.moisture_yield``, ``bond.moisture_coefficient``) read; the
@@ -293,20 +296,47 @@ def calibrate_variants(variants=None, preset="tiny", *,
             return {**contact, **contact_by_material.get(material, {}), "moisture_content": float(mc),
                     **({"wood_density": float(wood[material])} if material and wood_acts else {})}
 
-        submitted = {}
+        submitted, submit_lock = {}, threading.Lock()
 
         def submit_once(spec):
-            if spec.key not in submitted:
-                submitted[spec.key] = ev.submit(spec, rerun=missing(spec))
-            return submitted[spec.key]
+            with submit_lock:
+                if spec.key not in submitted:
+                    submitted[spec.key] = ev.submit(spec, rerun=missing(spec))
+                return submitted[spec.key]
 
-        pending = {(sz, mc, m): [submit_once(make_spec({}, preset=p, sigma_z=sz, seed=s, diametral=False,
-                                                    contact=contact_at(mc, m)))
-                              for s in run_setup(p, None, None, seeds, None).seeds] for sz, mc, m in groups}
+        # Where pellets are kept (relaxed_dir), one piston stroke per law and seed relaxes the
+        # pellets of every pressure (RunSpec.ladder): the highest pressure's run goes first,
+        # and a lower one is submitted (from the thread that waits for it, not the executor's)
+        # once that run is done, and loads its pellet from relaxed_dir. That saves the strokes
+        # to the lower pressures where the strokes are at least as many as the workers; with
+        # fewer, the workers would wait for the stroke instead.
+        seeds_ = run_setup(p, None, None, seeds, None).seeds
+        laws_ = sorted({g[1:] for g in groups})
+        workers = worker_count(ex)
+        ladder = keep and workers is not None and len(laws_) * len(seeds_) >= workers
+
+        def compaction_runs(mc, m, seed):
+            pressures = sorted(sz for sz, mc_, m_ in groups if (mc_, m_) == (mc, m))
+            specs = {sz: make_spec({}, preset=p, sigma_z=sz, seed=seed, diametral=False, contact=contact_at(mc, m))
+                     for sz in pressures}
+            if not ladder or len(pressures) == 1:
+                now = {sz: submit_once(spec) for sz, spec in specs.items()}
+                return {sz: (lambda f=f: f) for sz, f in now.items()}
+            top = submit_once(dataclasses.replace(specs[pressures[-1]], ladder=tuple(pressures[:-1])))
+
+            def lower(spec):
+                cf.wait([top])  # whatever its outcome: a failed stroke leaves the run to compact its own
+                return submit_once(spec)
+            return {sz: (lambda: top) if sz == pressures[-1] else (lambda spec=spec: lower(spec))
+                    for sz, spec in specs.items()}
+
+        per_seed = {(mc, m, s): compaction_runs(mc, m, s) for mc, m in laws_ for s in seeds_}
+        # per group, the compaction runs' futures, each got when it is waited for
+        pending = {(sz, mc, m): [per_seed[(mc, m, s)][sz] for s in seeds_] for sz, mc, m in groups}
 
         def one(v):
-            for f in pending[group(v)]:
-                f.result()
+            for get in pending[group(v)]:
+                get().result()
             st = {}
             if start == "table5":
                 st = {"E_b": v.e_b, "sigma_c": v.sigma_c}
@@ -333,7 +363,7 @@ def calibrate_variants(variants=None, preset="tiny", *,
             fits = dict(zip([v.label for v in vs], drivers.map(one, vs)))
         dens, dens_se = {}, {}
         for at in groups:
-            records = [f.result() for f in pending[at]]
+            records = [get().result() for get in pending[at]]
             outs, _, good, _ = mean_outputs(records)
             dens[at] = outs if good else {}
             key = "bulk_density_" + compaction_state

@@ -11,7 +11,9 @@ with that key: a scan submits its runs grouped by relax key so that a worker kee
 runs for the pellet it already holds. With ``relaxed_dir`` (a directory every worker can
 reach) the relaxed pellets are also written there as checkpoints (:mod:`pelletdem.checkpoint`,
 bit-exact, :func:`relaxed_path`), and a worker without one in memory loads it instead of
-compacting again, now or in a later run.
+compacting again, now or in a later run. A run whose spec has a ``ladder`` of lower
+pressures relaxes their pellets too, from its own piston stroke, and leaves them in
+``relaxed_dir`` for the runs at those pressures (:func:`pelletdem.pipeline.relaxed_pellets`).
 
 The failure of a simulated pellet is the first peak of sigma_1(dL/D) after which the
 (lightly smoothed) curve falls by 10% (:func:`failure_point`): a small pellet can break and
@@ -130,10 +132,9 @@ def _save_relaxed(spec: RunSpec, path: str, pellet, outs: dict, curve: dict) -> 
 
 
 def _relaxed(spec: RunSpec, relaxed_dir=None):
-    """(pellet, compaction outputs, compaction curve, source) for the spec's relax key; source is
-    'memory', 'disk' (a checkpoint in relaxed_dir) or '' (relaxed now)."""
-    from . import pipeline
-
+    """(pellet, compaction outputs, compaction curve, source, relaxations) for the spec's relax
+    key; source is 'memory', 'disk' (a checkpoint in relaxed_dir) or '' (relaxed now, with
+    relaxations the pellets relaxed: its ladder's too)."""
     key = spec.relax_key
     with _key_lock(key):
         with _MEMO_LOCK:
@@ -141,25 +142,42 @@ def _relaxed(spec: RunSpec, relaxed_dir=None):
             if hit is not None:
                 _MEMO.move_to_end(key)
         if hit is not None:
-            return (*hit, "memory")
-        source = ""
+            return (*hit, "memory", 0)
+        source, made = "", 0
         got = None
         if relaxed_dir is not None and os.path.exists(relaxed_path(relaxed_dir, key)):
             got = _load_relaxed(spec, relaxed_path(relaxed_dir, key))
             source = "disk" if got is not None else ""
         if got is None:
-            pellet, res = pipeline.relaxed_pellet(spec.preset, sigma_z=spec.sigma_z, seed=spec.seed,
-                                                  threads=1, progress=False)
-            outs, curve = _compaction_outputs(res)
-            outs = {k: float(v) for k, v in outs.items()}
-            if relaxed_dir is not None:
-                _save_relaxed(spec, relaxed_path(relaxed_dir, key), pellet, outs, curve)
-            got = (pellet, outs, curve)
+            got, made = _relax_ladder(spec, relaxed_dir)
         with _MEMO_LOCK:
             _MEMO[key] = got
             while len(_MEMO) > max(RELAX_MEMO_SIZE, 1):
                 _MEMO.popitem(last=False)
-        return (*got, source)
+        return (*got, source, made)
+
+
+def _relax_ladder(spec: RunSpec, relaxed_dir) -> Tuple[tuple, int]:
+    """Relax the spec's pellet, and with a ``relaxed_dir`` those of its ``ladder`` pressures
+    that the directory lacks, from one piston stroke (:func:`pipeline.relaxed_pellets`; each
+    bit for bit its own compaction's), saving each there. Returns the spec's (pellet,
+    outputs, curve) and how many pellets were relaxed."""
+    from . import pipeline
+
+    pressures = sorted({float(sz) for sz in spec.ladder if float(sz) < spec.sigma_z}) if relaxed_dir else []
+    lower = [s for s in (dataclasses.replace(spec, sigma_z=sz, bond=None, ladder=()) for sz in pressures)
+             if not os.path.exists(relaxed_path(relaxed_dir, s.relax_key))]
+    specs = lower + [spec]
+    made = pipeline.relaxed_pellets(spec.preset, [s.sigma_z for s in specs], seed=spec.seed, threads=1,
+                                    progress=False)
+    got = None
+    for s, (pellet, res) in zip(specs, made):
+        outs, curve = _compaction_outputs(res)
+        outs = {k: float(v) for k, v in outs.items()}
+        if relaxed_dir is not None:
+            _save_relaxed(s, relaxed_path(relaxed_dir, s.relax_key), pellet, outs, curve)
+        got = (pellet, outs, curve)
+    return got, len(specs)
 
 
 def clear_memo() -> None:
@@ -219,7 +237,8 @@ def run_point(spec: RunSpec, relaxed_dir: Optional[Union[str, os.PathLike]] = No
     ``sigma_f_max`` / ``dLf_D_max`` the curve's global maximum, bond counts), ``curve``
     ({dL_D, sigma_1 (Pa)}), ``compaction_curve``,
     ``relaxed_reused`` (False when this run relaxed the pellet), ``relaxed_from`` ('memory',
-    'disk' or ''), ``wall_time_s`` (s), ``worker``.
+    'disk' or ''), ``relaxations`` (pellets this run relaxed: 0, 1, or more with the spec's
+    ``ladder``), ``wall_time_s`` (s), ``worker``.
     """
     from . import pipeline
 
@@ -228,9 +247,10 @@ def run_point(spec: RunSpec, relaxed_dir: Optional[Union[str, os.PathLike]] = No
            "ok": False, "error": None, "outputs": {}, "curve": {}, "compaction_curve": {},
            "relaxed_reused": False, "worker": f"{socket.gethostname()}:{os.getpid()}"}
     try:
-        pellet, outs, ccurve, source = _relaxed(spec, relaxed_dir)
+        pellet, outs, ccurve, source, made = _relaxed(spec, relaxed_dir)
         rec["relaxed_reused"] = bool(source)
         rec["relaxed_from"] = source
+        rec["relaxations"] = made
         rec["outputs"].update(outs)
         rec["compaction_curve"] = ccurve
         if spec.bond is not None:
