@@ -3,14 +3,15 @@
 from one bed and one stroke (`pipeline.relaxed_pellets`) against each from its own bed and
 stroke (`pipeline.relaxed_pellet` twice), on the same packings, one thread, timed back to back.
 
-Usage (one core; `quick`, 2 packings: ~4 minutes):
+Usage (one core; `quick`: 3-6 minutes per packing, the softer the law the longer):
 
     python benchmarks/bench_one_stroke.py --preset quick --packings 2
     python benchmarks/bench_one_stroke.py --preset tiny --packings 4 --set contact.k1=1.5e4
 
-The preset carries the calibration's overlap guard. Prints per packing the two wall times and their ratio (one stroke / two), and that the pellets
-are the same to the bit (positions and velocities of both pressures). `--set contact.NAME=V`
-runs another contact law (SI units; repeatable), e.g. a softer k1 that strokes further.
+The preset carries the calibration's overlap guard. Prints per packing the two wall times
+and their ratio (one stroke / two), and that the pellets are the same to the bit (positions
+and velocities of both pressures). `--set contact.NAME=V` runs another contact law (SI
+units; repeatable), e.g. a softer k1 that strokes further.
 """
 import argparse
 import time
