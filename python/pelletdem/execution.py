@@ -29,7 +29,8 @@ from .run_cache import RunCache
 from .runs import RunSpec, canonical
 from .worker import run_point
 
-__all__ = ["open_executor", "worker_count", "with_relaxed_dir", "Evaluator", "unguarded_main_line", "check_main_guard"]
+__all__ = ["open_executor", "worker_count", "stroke_plan", "with_relaxed_dir", "Evaluator", "unguarded_main_line",
+           "check_main_guard"]
 
 
 #: How often (s) a worker looks whether the process that started it is still there.
@@ -268,6 +269,29 @@ def worker_count(ex) -> Optional[int]:
     return n if isinstance(n, int) and n >= 1 else None
 
 
+def stroke_plan(specs: Sequence[RunSpec], workers: Optional[int]):
+    """Which of ``specs`` (one per relaxed pellet) to submit first, and with which ``ladder``:
+    where the piston strokes (``RunSpec.stroke_key``) are at least as many as the ``workers``,
+    each stroke's highest pressure goes first with the lower ones as its ladder, and their
+    runs wait for it (loading their pellets from the relaxed_dir it fills); with fewer
+    strokes, or ``workers`` unknown, every spec goes first on its own (the workers would
+    otherwise wait for the stroke). Returns ([(index, ladder)], {index of a stroke's top:
+    indices of its lower pressures})."""
+    strokes: Dict[str, List[int]] = {}
+    for i, spec in enumerate(specs):
+        strokes.setdefault(spec.stroke_key, []).append(i)
+    ladder = workers is not None and len(strokes) >= workers
+    first, after = [], {}
+    for idx in strokes.values():
+        idx.sort(key=lambda i: specs[i].sigma_z)
+        if ladder and len(idx) > 1:
+            after[idx[-1]] = idx[:-1]
+            first.append((idx[-1], tuple(specs[i].sigma_z for i in idx[:-1])))
+        else:
+            first.extend((i, ()) for i in idx)
+    return first, after
+
+
 def with_relaxed_dir(runner, relaxed_dir):
     """``runner`` as it is run: :func:`pelletdem.worker.run_point` bound to ``relaxed_dir``
     (a directory, created here, for relaxed-pellet checkpoints; a picklable partial) when
@@ -404,19 +428,10 @@ class Evaluator:
         groups: Dict[str, List[int]] = {}
         for i in order:
             groups.setdefault(specs[i].relax_key, []).append(i)
-        strokes: Dict[str, List[str]] = {}
-        for key, members in groups.items():
-            strokes.setdefault(specs[members[0]].stroke_key, []).append(key)
-        workers = worker_count(self.executor)
-        ladder = workers is not None and len(strokes) >= workers
-        first, after = [], {}  # (relax key, ladder) to submit now; stroke top -> its lower keys
-        for keys in strokes.values():
-            keys.sort(key=lambda k: specs[groups[k][0]].sigma_z)
-            if ladder and len(keys) > 1:
-                after[keys[-1]] = keys[:-1]
-                first.append((keys[-1], tuple(specs[groups[k][0]].sigma_z for k in keys[:-1])))
-            else:
-                first.extend((k, ()) for k in keys)
+        keys = list(groups)
+        plan, waits = stroke_plan([specs[groups[k][0]] for k in keys], worker_count(self.executor))
+        first = [(keys[j], lower) for j, lower in plan]  # (relax key, ladder) to submit now
+        after = {keys[j]: [keys[i] for i in low] for j, low in waits.items()}  # stroke top -> lower keys
         # every submission from this thread: an executor's own callback thread may not submit
         ready: "queue.Queue[str]" = queue.Queue()
         futs: Dict[int, cf.Future] = {}

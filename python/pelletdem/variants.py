@@ -26,7 +26,7 @@ from typing import Any, Callable, Dict, Mapping, Optional, Sequence, Union
 import numpy as np
 
 from .engine import BondLaw, k1_from_yield_strength
-from .execution import Evaluator, open_executor, with_relaxed_dir, worker_count
+from .execution import Evaluator, open_executor, stroke_plan, with_relaxed_dir, worker_count
 from .objectives import Targets, as_variants, compaction_targets, mean_outputs
 from .run_cache import RunCache
 from .runs import RunSpec, as_preset, bound_signs, make_spec, parse_bounds, run_setup
@@ -305,34 +305,22 @@ def calibrate_variants(variants=None, preset="tiny", *,
                 return submitted[spec.key]
 
         # Where pellets are kept (relaxed_dir), one piston stroke per law and seed relaxes the
-        # pellets of every pressure (RunSpec.ladder): the highest pressure's run goes first,
-        # and a lower one is submitted (from the thread that waits for it, not the executor's)
-        # once that run is done, and loads its pellet from relaxed_dir. That saves the strokes
-        # to the lower pressures where the strokes are at least as many as the workers; with
-        # fewer, the workers would wait for the stroke instead.
+        # pellets of every pressure (execution.stroke_plan): the highest pressure's run goes
+        # first, and a lower one is submitted (from the thread that waits for it, not the
+        # executor's) once that run is done, whatever its outcome (a failed stroke leaves the
+        # run to compact its own), and loads its pellet from relaxed_dir.
         seeds_ = run_setup(p, None, None, seeds, None).seeds
-        laws_ = sorted({g[1:] for g in groups})
-        workers = worker_count(ex)
-        ladder = keep and workers is not None and len(laws_) * len(seeds_) >= workers
-
-        def compaction_runs(mc, m, seed):
-            pressures = sorted(sz for sz, mc_, m_ in groups if (mc_, m_) == (mc, m))
-            specs = {sz: make_spec({}, preset=p, sigma_z=sz, seed=seed, diametral=False, contact=contact_at(mc, m))
-                     for sz in pressures}
-            if not ladder or len(pressures) == 1:
-                now = {sz: submit_once(spec) for sz, spec in specs.items()}
-                return {sz: (lambda f=f: f) for sz, f in now.items()}
-            top = submit_once(dataclasses.replace(specs[pressures[-1]], ladder=tuple(pressures[:-1])))
-
-            def lower(spec):
-                cf.wait([top])  # whatever its outcome: a failed stroke leaves the run to compact its own
-                return submit_once(spec)
-            return {sz: (lambda: top) if sz == pressures[-1] else (lambda spec=spec: lower(spec))
-                    for sz, spec in specs.items()}
-
-        per_seed = {(mc, m, s): compaction_runs(mc, m, s) for mc, m in laws_ for s in seeds_}
-        # per group, the compaction runs' futures, each got when it is waited for
-        pending = {(sz, mc, m): [per_seed[(mc, m, s)][sz] for s in seeds_] for sz, mc, m in groups}
+        density = {(sz, mc, m, s): make_spec({}, preset=p, sigma_z=sz, seed=s, diametral=False,
+                                             contact=contact_at(mc, m)) for sz, mc, m in groups for s in seeds_}
+        unique = list({spec.key: spec for spec in density.values()}.values())
+        plan, waits = stroke_plan(unique, worker_count(ex)) if keep else ([(i, ()) for i in range(len(unique))], {})
+        got = {}  # run key -> the run's future, got when it is waited for
+        for i, lower in plan:
+            f = submit_once(dataclasses.replace(unique[i], ladder=lower) if lower else unique[i])
+            got[unique[i].key] = lambda f=f: f
+            for k in waits.get(i, []):
+                got[unique[k].key] = lambda f=f, spec=unique[k]: (cf.wait([f]), submit_once(spec))[1]
+        pending = {(sz, mc, m): [got[density[(sz, mc, m, s)].key] for s in seeds_] for sz, mc, m in groups}
 
         def one(v):
             for get in pending[group(v)]:
