@@ -123,14 +123,15 @@ def test_contact_law_ranges(field, value, match):
         pd.ContactLaw(**{field: value}).to_core()
 
 
-def test_dt_above_the_stability_limit():
+def test_dt_above_the_stable_time_step():
     w = one_particle(dt=1e-6)
-    dtc = w.critical_time_step()
-    with raises(r"dt = .* s is above the stability limit .* allowed 0 < dt <= .* s"):
-        w.dt = 1.01 * dtc
+    dt_max = w.max_time_step()
+    assert dt_max == pytest.approx(pd.World.TIME_STEP_SAFETY * w.critical_time_step(), rel=1e-15)
+    with raises(r"dt = .* s is above the stable time step: allowed 0 < dt <= .* s, 0\.5 of the stability limit"):
+        w.dt = 1.01 * dt_max
     assert w.dt == 1e-6  # unchanged after the refusal
-    w.dt = 0.99 * dtc
-    with raises(r"dt = 0\.001 s is above the stability limit"):
+    w.dt = 0.99 * dt_max
+    with raises(r"dt = 0\.001 s is above the stable time step"):
         one_particle(dt=1e-3)
     with raises(r"dt = -1 s must be a finite number > 0"):
         w.dt = -1.0
@@ -140,18 +141,18 @@ def test_dt_above_the_stability_limit():
 
 def test_stiffer_contact_params_refused_when_dt_too_large():
     w = one_particle(dt=1e-5)
-    with raises(r"dt = 1e-05 s is above the stability limit"):
+    with raises(r"dt = 1e-05 s is above the stable time step"):
         w.set_contact_params(pd.ContactLaw(k1=1e7, k2=4e7).to_core())
     assert w.contact_params.k2 == 4e5  # the old law is kept
 
 
-def test_stability_limit_holds_for_a_free_pair():
+def test_stable_time_step_holds_for_a_free_pair():
     """critical_time_step() must be a real bound for a single contact between two free spheres:
     their relative motion has the reduced mass m/2, so omega^2 = 2 k2 / m, twice that of a
     sphere on a wall of the same stiffness. A pair glued by strong adhesion oscillates on the
-    k2 line; at 0.95 of the limit it must stay bound and bounded (velocity Verlet is stable for
-    omega dt < 2). Walls here are no stiffer than pairs (wall_stiffness_factor = 1), the case
-    where a wall-only bound is sqrt(2) too large."""
+    k2 line; at the largest dt the world accepts it must stay bound and bounded (velocity
+    Verlet is stable for omega dt < 2). Walls here are no stiffer than pairs
+    (wall_stiffness_factor = 1), the case where a wall-only bound is sqrt(2) too large."""
     k2 = 4e5
     law = pd.ContactLaw(k1=1e5, k2=k2, kc=4e5, mu=0.0, mu_wall=0.0, rolling=0.0,
                         wall_stiffness_factor=1.0)
@@ -165,7 +166,7 @@ def test_stability_limit_holds_for_a_free_pair():
     for _ in range(100):
         w.run(20)
         ke_ref = max(ke_ref, w.kinetic_energy())
-    w.dt = 0.95 * w.critical_time_step()
+    w.dt = w.max_time_step()
     for _ in range(100):
         w.run(10)
         assert w.contact_count == 1

@@ -241,7 +241,20 @@ void bind_world(py::module_& m) {
            py::arg("smoothing_steps") = 1.0,
            "Average the load force over ~smoothing_steps steps and keep its peak from the load marker "
            "from_marker (m) on, for the load_drop_below stop (inf: stop keeping them).")
-      .def("critical_time_step", &World::critical_time_step)
+      .def("critical_time_step", &World::critical_time_step,
+           "Stability limit of the stiffest spring the laws can reach on the lightest particle, s.")
+      .def("max_time_step", &World::max_time_step,
+           "The largest dt the world accepts: kTimeStepSafety of critical_time_step(), s.")
+      .def(
+          "time_step_springs",
+          [](const World& w) {
+            py::list out;
+            for (const TimeStepSpring& s : w.time_step_springs())
+              out.append(py::dict(py::arg("what") = s.what, py::arg("k") = s.k, py::arg("k_eff") = s.k_eff,
+                                  py::arg("zeta") = s.zeta, py::arg("dt_limit") = s.dt_limit));
+            return out;
+          },
+          "Each spring the laws can reach: what (str), k and k_eff (N/m), zeta (-), dt_limit (s).")
       .def_property_readonly("rebuild_count", &World::rebuild_count)
       .def_property_readonly("pair_list_size", [](const World& w) { return w.neighbors().pair_count(); })
       // Read-only zero-copy views.

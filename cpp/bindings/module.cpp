@@ -72,6 +72,7 @@ PYBIND11_MODULE(_core, m) {
   bind_laws(m);
   bind_world(m);
 
+  m.attr("TIME_STEP_SAFETY") = World::kTimeStepSafety;
   m.def("truncated_normal_radii", &checked_truncated_normal_radii, py::arg("n"), py::arg("mean"),
         py::arg("sd"), py::arg("r_min"), py::arg("r_max"), py::arg("seed"),
         "Radii (m) from a normal distribution truncated to [r_min, r_max], seeded.");

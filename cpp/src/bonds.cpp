@@ -49,6 +49,12 @@ long World::create_bonds(const BondParams& law) {
       bonds_.push_back(b);
       ++created;
     }
+  try {
+    validate_time_step();  // stiff bonds can lower the stable step: refused before any step
+  } catch (...) {
+    bonds_.clear();
+    throw;
+  }
   forces_valid_ = false;
   bond_map_generation_ = -1;
   return created;

@@ -67,7 +67,14 @@ void World::set_gravity(const Vec3& g) {
 
 void World::set_max_overlap_ratio(double ratio) {
   require_range("max_overlap_ratio", ratio, 1e-3, 10.0);
-  params_.max_overlap_ratio = ratio;
+  const double old = params_.max_overlap_ratio;
+  params_.max_overlap_ratio = ratio;  // the overlaps it accepts bound the stiffest springs
+  try {
+    validate_time_step();
+  } catch (...) {
+    params_.max_overlap_ratio = old;
+    throw;
+  }
 }
 
 void World::set_load_walls(const std::vector<int>& ws) {
@@ -167,38 +174,6 @@ Wall& World::wall(int k) {
 const Wall& World::wall(int k) const {
   require_range("wall index", k, 0, wall_count() - 1);
   return walls_[k];
-}
-
-double World::critical_time_step() const {
-  if (p_.size() == 0) return HUGE_VAL;
-  // Stiffest single contact against the lightest body: a linear oscillator is stable for
-  // dt < 2 / omega. Tangential springs couple to rotation, which raises their effective
-  // stiffness by 1 + m r^2 / I = 3.5 for a solid sphere.
-  double m_min = HUGE_VAL, r_min = HUGE_VAL;
-  for (std::size_t i = 0; i < p_.size(); ++i) {
-    m_min = std::min(m_min, p_.m[i]);
-    r_min = std::min(r_min, p_.r[i]);
-  }
-  const ContactLawParams& c = params_.contact;
-  const double s_r = c.scale_with_radius ? r_max_ / c.r_ref : 1.0;
-  // A wall contact is stiffness wall_stiffness_factor * s_r * k on one particle (m >= m_min).
-  // A particle pair is at most s_r * k (2 r* / r_ref <= r_max / r_ref when scaled) on the
-  // reduced mass m* = m_i m_j / (m_i + m_j) >= m_min / 2, i.e. like 2 s_r k on m_min: two
-  // free spheres are twice as stiff per unit mass as one sphere on a wall of the same
-  // stiffness. (Without the pair term a wall_stiffness_factor below 2 gave a limit sqrt(2)
-  // too large or more, and a bound pair oscillating at dt just under it blew up.)
-  const double s_eff = std::max(c.wall_stiffness_factor, 2.0) * s_r;
-  const double k_eff = s_eff * std::max(c.k2, 3.5 * c.kt_ratio * c.k1);
-  return 2.0 * std::sqrt(m_min / k_eff);
-}
-
-void World::validate_time_step() const {
-  const double dtc = critical_time_step();
-  if (params_.dt > dtc)
-    throw ParameterError(cat("dt = ", params_.dt,
-                             " s is above the stability limit of the "
-                             "stiffest contact: allowed 0 < dt <= ",
-                             dtc, " s (2 sqrt(m_min / k_max)); the paper uses about 0.1 of it"));
 }
 
 double World::effective_skin() const { return params_.skin > 0.0 ? params_.skin : 0.1 * r_max_; }

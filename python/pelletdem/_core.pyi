@@ -21,6 +21,9 @@ _IndexArray = NDArray[numpy.uint32]
 
 # --- errors -------------------------------------------------------------------------------
 
+TIME_STEP_SAFETY: float
+"""The fraction of the stiffest spring's stability limit that a World accepts as dt (-)."""
+
 class ParameterError(ValueError):
     """A bad input; the message names the parameter and its allowed range."""
 
@@ -344,7 +347,11 @@ class World:
         """Average the load force over ~smoothing_steps steps and keep its peak from the load
         marker from_marker (m) on, for the load_drop_below stop (inf: stop keeping them)."""
     def critical_time_step(self) -> float:
-        """Stability limit of the stiffest contact on the lightest particle, s."""
+        """Stability limit of the stiffest spring the laws can reach on the lightest particle, s."""
+    def max_time_step(self) -> float:
+        """The largest dt the world accepts: TIME_STEP_SAFETY of critical_time_step(), s."""
+    def time_step_springs(self) -> list[dict[str, Any]]:
+        """Each spring the laws can reach: what (str), k and k_eff (N/m), zeta (-), dt_limit (s)."""
     @property
     def rebuild_count(self) -> int:
         """Neighbour-list rebuilds so far."""

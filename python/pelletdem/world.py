@@ -58,6 +58,9 @@ class World:
     sample_interval (steps between time-series samples).
     """
 
+    #: The fraction of the stiffest spring's stability limit that dt may reach (-).
+    TIME_STEP_SAFETY: float = _core.TIME_STEP_SAFETY
+
     def __init__(self, *, dt: float = 2e-6, box=((-0.01, -0.01, -0.01), (0.01, 0.01, 0.05)),
                  contact: Optional[ContactLaw] = None, density: float = 680.0,
                  density_scale: float = 1e4, gravity=(0.0, 0.0, -9.81), skin: float = 0.0,
@@ -493,8 +496,24 @@ class World:
         return self._core.vector_kernels
 
     def critical_time_step(self) -> float:
-        """The largest stable time step of the particles' stiffest contact, s."""
+        """The stability limit of the stiffest spring the laws can reach, on the lightest
+        particle, s: velocity Verlet's 2 / omega (sqrt(1 + zeta^2) - zeta). The world accepts
+        dt up to :meth:`max_time_step`."""
         return self._core.critical_time_step()
+
+    def max_time_step(self) -> float:
+        """The largest dt the world accepts, s: ``TIME_STEP_SAFETY`` (0.5) of
+        :meth:`critical_time_step`, as a particle pressed by many contacts at once has modes
+        above a single contact's (docs/model.md, "The time step")."""
+        return self._core.max_time_step()
+
+    def time_step_springs(self) -> list:
+        """Every spring the contact law, its effects and the bonds can reach over the range
+        they allow, as dicts: ``what`` (where it acts and the parameters that set it), ``k``
+        (its stiffness, N/m), ``k_eff`` (what it puts on the lightest particle: x2 between two
+        particles, x3.5 tangential, N/m), ``zeta`` (its damping, fraction of critical) and
+        ``dt_limit`` (the stability limit it sets, s). The guard's is the smallest."""
+        return self._core.time_step_springs()
 
     # --- running ---------------------------------------------------------------------------
     def step(self) -> None:

@@ -12,11 +12,20 @@
 // in the generated pelletdem/effects_list.hpp: no other file names it.
 #include <algorithm>
 #include <cstdint>
+#include <string>
 #include <type_traits>
+#include <utility>
 
 #include "pelletdem/vec.hpp"
 
 namespace pelletdem {
+
+// One spring a law can produce: its largest stiffness and what sets it, in the parameters'
+// names, for the time step guard and its messages (World::time_step_limit).
+struct Spring {
+  double k;          // N/m
+  std::string what;  // e.g. "k_p = plastic_stiffness_ratio x k2"
+};
 
 // The contact law's hook points (HystereticLaw). Each receives the law's parameters `p` and
 // the value the law has so far, and returns it unchanged unless the effect is switched on.
@@ -70,6 +79,20 @@ struct ContactEffect {
   template <class P>
   static double wall_load_cap(const P&, double cap, double /*r*/, bool /*crushable*/) {
     return cap;
+  }
+  // The largest unloading stiffness (N/m) the effect can give a contact whose overlap stays
+  // within x_max r*, given the law's so far (`k2`): the time step guard's stiffest spring. An
+  // effect that shapes the unloading stiffness must report its largest here.
+  template <class P>
+  static Spring largest_unloading(const P&, Spring k2, double /*x_max*/) {
+    return k2;
+  }
+  // The loading branch's steepest tangent dF/d(delta) (N/m) up to overlap x_max r*, given the
+  // law's so far (`k1`, with the loading_stiffness_factor in it). An effect that shapes the
+  // loading force must report its steepest here.
+  template <class P>
+  static Spring steepest_loading(const P&, Spring k1, double /*x_max*/) {
+    return k1;
   }
 };
 
@@ -150,6 +173,16 @@ struct EffectList {
   static double wall_load_cap(const P& p, double cap, double r, bool crushable) {
     ((cap = E::wall_load_cap(p, cap, r, crushable)), ...);
     return cap;
+  }
+  template <class P>
+  static Spring largest_unloading(const P& p, Spring k2, double x_max) {
+    ((k2 = E::largest_unloading(p, std::move(k2), x_max)), ...);
+    return k2;
+  }
+  template <class P>
+  static Spring steepest_loading(const P& p, Spring k1, double x_max) {
+    ((k1 = E::steepest_loading(p, std::move(k1), x_max)), ...);
+    return k1;
   }
   template <class P>
   static double radius(const P& p, double r_b, double delta0, double r_eff) {

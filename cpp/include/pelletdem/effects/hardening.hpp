@@ -22,6 +22,15 @@ struct Hardening : ContactEffect {
     const double x = delta / r_eff;
     return f * (1.0 + p.hardening * (p.hardening_exponent == 1.0 ? x : std::pow(x, p.hardening_exponent)));
   }
+  // d/d(delta) of k1 delta (1 + h x^n) = k1 (1 + h (n + 1) x^n), rising with x = delta / r*:
+  // steepest at the largest overlap the run accepts.
+  template <class P>
+  static Spring steepest_loading(const P& p, Spring k1, double x_max) {
+    if (p.hardening <= 0.0) return k1;
+    const double n = p.hardening_exponent;
+    return {k1.k * (1.0 + p.hardening * (n + 1.0) * std::pow(x_max, n)),
+            k1.what + " x (1 + hardening (n + 1) (the largest overlap / r*)^n)"};
+  }
 };
 
 }  // namespace pelletdem

@@ -40,6 +40,12 @@ struct SaturatingUnloading : ContactEffect {
     const double d0 = (b > 0.0) ? 2.0 * plain / (b + root) : (root - b) / (2.0 * a);
     return d0 < d_sat ? d0 : delta - f / (p.plastic_stiffness_ratio * k2);
   }
+  // k_p, reached once delta0 = phi r*: a compaction to 60-120 MPa flattens contacts that far.
+  template <class P>
+  static Spring largest_unloading(const P& p, Spring k2, double /*x_max*/) {
+    if (p.plastic_stiffness_ratio <= 1.0) return k2;
+    return {p.plastic_stiffness_ratio * k2.k, "k_p = plastic_stiffness_ratio x " + k2.what};
+  }
 };
 
 }  // namespace pelletdem

@@ -34,6 +34,13 @@ struct UnloadingGrowth : ContactEffect {
     const double root = std::sqrt(std::max(b * b + 4.0 * a * plain, 0.0));
     return (b > 0.0) ? 2.0 * plain / (b + root) : (root - b) / (2.0 * a);
   }
+  // Unbounded in delta0, so at the largest residual overlap the run accepts (delta0 <= delta).
+  template <class P>
+  static Spring largest_unloading(const P& p, Spring k2, double x_max) {
+    if (p.unloading_growth <= 0.0) return k2;
+    return {k2.k * (1.0 + p.unloading_growth * x_max),
+            k2.what + " x (1 + unloading_growth x the largest overlap / r*)"};
+  }
 };
 
 }  // namespace pelletdem
