@@ -15,7 +15,7 @@ import pytest
 
 import pelletdem as pd
 from effects.test_hardening import _drive
-from pelletdem import presets
+from pelletdem import presets, stages
 from test_contact_law import R, frictionless
 
 # Run R's law (docs/calibration.md, "The chosen model"): oak's k1, the shared rows.
@@ -55,6 +55,30 @@ def test_the_chosen_model_refuses_the_steps_that_ran_unstably(dt):
     m = w.masses()[0]
     assert w.critical_time_step() == pytest.approx(2 * math.sqrt((m / 2) / 4.8e6), rel=1e-12)
     assert p.dt <= w.max_time_step() < 4e-6
+
+
+@pytest.mark.parametrize("dt,release_damping,refused", [(4e-6, 0.3, True), (2.8e-6, 0.3, True),
+                                                         (2.8e-6, 0.0, False)])
+def test_the_fill_refuses_a_step_that_a_later_stage_makes_unstable(monkeypatch, dt, release_damping, refused):
+    """The bed settles under a law without the compaction effects (stages.fill_law), whose
+    step is far larger; the fill checks the later stages' laws before it steps. 2.8e-6 s holds
+    k_p undamped (2.87e-6) but not with the relaxation's damping (0.3 of critical on k2)."""
+    p = presets.get_preset("tiny").with_(contact=pd.ContactLaw(**CHOSEN_LAW), max_overlap_ratio=2.0, dt=dt,
+                                         release_damping_ratio=release_damping)
+    ran = []
+
+    class Stepped(Exception):
+        pass
+
+    def first_step(pellet, name, *args, **kwargs):
+        ran.append(name)
+        raise Stepped
+
+    monkeypatch.setattr(stages, "_run", first_step)
+    expected = pd.ParameterError if refused else Stepped
+    with pytest.raises(expected, match=r"k_p = plastic_stiffness_ratio x k2" if refused else None):
+        stages.fill(p, progress=False)
+    assert ran == ([] if refused else ["fill"])
 
 
 def test_the_diametral_stages_law_is_guarded_too():

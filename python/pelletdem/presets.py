@@ -16,7 +16,10 @@ class Preset:
     divided by it). dt: time step, s. piston_speed, unload_speed, plate_speed, demould_rate: m/s
     (the laboratory's 3.3e-5 m/s is out of reach, see docs/model.md, "Quasi-static control").
     fill_solid_fraction: solid fraction of the random-placement region (-). fill_gravity_factor:
-    gravity is raised by this factor while the bed settles (-). ke_threshold: relaxation ends
+    gravity is raised by this factor while the bed settles (-). fill_dt: the time step while
+    the bed settles, s (0: dt); the fill's law has no compaction effects, so its stable step
+    is larger. clear_at_once: the piston and the mould, once they carry no load, are moved
+    clear and removed at once instead of stepped clear at the release speed (bool). ke_threshold: relaxation ends
     when the kinetic energy (scaled mass) falls below it, J. release_damping_ratio: viscous
     normal damping (fraction of critical) on the pairs and the floor during relax only, so the
     energy released at unloading and demoulding leaves the pellet as heat instead of as
@@ -47,6 +50,8 @@ class Preset:
     plate_speed: float = 0.02
     fill_solid_fraction: float = 0.25
     fill_gravity_factor: float = 1.0e4
+    fill_dt: float = 0.0
+    clear_at_once: bool = False
     ke_threshold: float = 1.0e-8
     release_damping_ratio: float = 0.3
     relax_min_time: float = 0.005
@@ -74,6 +79,12 @@ class Preset:
         f = self.break_from_dLD
         if not (isinstance(f, (int, float)) and 0.0 <= f <= 0.5):
             raise ParameterError(f"break_from_dLD = {f!r} is out of range: allowed 0 <= break_from_dLD <= 0.5")
+        fd = self.fill_dt
+        if not (isinstance(fd, (int, float)) and not isinstance(fd, bool) and 0.0 <= fd <= 1e-3):
+            raise ParameterError(f"fill_dt = {fd!r} s is out of range: allowed 0 <= fill_dt <= 1e-3 s "
+                                 "(0: the preset's dt)")
+        if not isinstance(self.clear_at_once, bool):
+            raise ParameterError(f"clear_at_once = {self.clear_at_once!r} must be True or False")
 
     def with_(self, **changes) -> "Preset":
         """A copy with some fields changed (e.g. halved speeds for a quasi-static check)."""

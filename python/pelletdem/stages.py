@@ -16,7 +16,7 @@ from typing import Dict, List, Optional, Tuple
 
 import numpy as np
 
-from .engine import BondLaw, ParameterError, World, random_pack_cylinder, truncated_normal_radii
+from .engine import BondLaw, ParameterError, RunOutcome, World, random_pack_cylinder, truncated_normal_radii
 from .pellet_measures import (
     bulk_coordination_number,
     inertia_number,
@@ -25,6 +25,7 @@ from .pellet_measures import (
     measure,
 )
 from .presets import Preset
+from .stage_laws import check_time_step, compaction_law, fill_law, preset_law, release_damping  # noqa: F401
 
 
 @dataclass
@@ -170,55 +171,7 @@ def calm(world) -> float:
     return e
 
 
-def _release_damping(pellet: Pellet, on: bool) -> None:
-    """Switch the preset's release damping on (demould, relax) or back to the law's own."""
-    w = pellet.world
-    law = w.contact_law
-    ratio = pellet.preset.release_damping_ratio if on else pellet.preset.contact.normal_damping_ratio
-    ratio = max(ratio, pellet.preset.contact.normal_damping_ratio)
-    if law.normal_damping_ratio != ratio:
-        w.set_contact_law(replace(law, normal_damping_ratio=ratio))
-
-
-def _preset_law(pellet: Pellet) -> None:
-    """Put the preset's contact law in force. A pellet relaxed once serves runs whose laws
-    differ in what acts after relaxation (the calibration and the loop branch bond-parameter
-    runs off one relaxed pellet): the moisture content its bonds take, the plates' crushing."""
-    if pellet.world.contact_law != pellet.preset.contact:
-        pellet.world.set_contact_law(pellet.preset.contact)
-
-
 # --- fill ------------------------------------------------------------------------------------
-
-def _effects_off(law, stage: str):
-    """``law`` with every contact effect of the library that acts in ``stage`` switched off."""
-    from .effects import EFFECTS
-
-    off = {e.param[len("contact."):]: e.off for e in EFFECTS.values()
-           if e.stage == stage and e.param.startswith("contact.")}
-    return replace(law, **off)
-
-
-def compaction_law(law):
-    """The contact law from fill to relaxation: ``law`` with the library's 'diametral' contact
-    effects switched off. They describe the made pellet (its particles densified by the
-    compaction, the plates' crushing), so they act from the bonding on (:func:`bond` and
-    :func:`diametral` put the preset's whole law in force), and the relaxed pellet, one per
-    packing whatever their strengths, is that of the paper's law."""
-    return _effects_off(law, "diametral")
-
-
-def fill_law(law):
-    """The contact law a bed settles under: :func:`compaction_law` of ``law`` with every
-    compaction effect of the library (:mod:`pelletdem.effects`, stage 'compaction') switched
-    off too. Those effects act on plastic flattening, which a bed settling under gravity
-    (overlaps ~1e-4 of a radius) does not reach; but the settling is chaotic, so a law
-    differing in the fourth digit of an effect's strength settles another bed (the highest
-    particle, h0, moved 3 % with it). With one bed per packing seed, whatever the effects'
-    strengths, a model and its candidates compact the same beds and their differences are
-    paired."""
-    return _effects_off(compaction_law(law), "compaction")
-
 
 def fill(preset: Preset, seed: int = 0, threads: int = 1, n_particles: Optional[int] = None,
          mass: Optional[float] = None, progress: Optional[bool] = None):
@@ -263,22 +216,26 @@ def fill(preset: Preset, seed: int = 0, threads: int = 1, n_particles: Optional[
         "mould": world.add_cylinder("mould", (0.0, 0.0, 0.0), R),
         "piston": world.add_plane("piston", (0.0, 0.0, fill_height + 2.0 * preset.radius_max), (0.0, 0.0, -1.0)),
     }
+    check_time_step(world, preset)
     masses = np.array(world.m)  # a copy: sort_particles below refuses while views are alive
     pellet = Pellet(world, preset, walls, R, float(masses.sum() / preset.density_scale))
     # Free fall of the bed under g takes sqrt(2 h / g); allow four times that.
     world.gravity = (0.0, 0.0, -9.81 * preset.fill_gravity_factor / 1.0)
     g_eff = 9.81 * preset.fill_gravity_factor / preset.density_scale
     t_fall = math.sqrt(2.0 * fill_height / g_eff)
-    max_steps = int(6.0 * t_fall / preset.dt)
+    dt = preset.fill_dt if preset.fill_dt > 0.0 else preset.dt
+    world.dt = dt  # the fill's law is refused a dt its springs cannot hold, as any
+    max_steps = int(6.0 * t_fall / dt)
     _sample_every(pellet, max_steps)
     # At rest enough: rms speed below 3 mm/s. The bed's structure is fixed by then (the
     # coordination number has stopped rising); the compaction that follows erases the rest.
     ke_rest = 0.5 * masses.sum() * 3e-3**2
     # The bed starts at rest and needs ~1.5 ms to pass 3 mm/s: let it fall first, or the test
     # passes at its first check and the bed is never settled.
-    fall = _run(pellet, "fill", int(t_fall / preset.dt), progress)
+    fall = _run(pellet, "fill", int(t_fall / dt), progress)
     out = _run(pellet, "fill", max_steps - fall.steps, progress, kinetic_energy_below=ke_rest,
                check_interval=100)
+    world.dt = preset.dt
     world.gravity = (0.0, 0.0, -9.81)
     law = compaction_law(preset.contact)
     if world.contact_law != law:
@@ -380,6 +337,20 @@ def _compaction_done(pellet: Pellet, sigma_z: float, v: float, reached: bool, st
         wall_time_s=time.perf_counter() - t0, steps=steps)
 
 
+def _clear(pellet: Pellet, wall: int, name: str, distance: float, speed: float, progress):
+    """Move an unloaded `wall` (the piston or the mould) `distance` (m) further out: stepped
+    at `speed` (m/s) as it moves, or at once with the preset's clear_at_once. Returns the run."""
+    w = pellet.world
+    if not pellet.preset.clear_at_once:
+        return _run(pellet, name, int(distance / (speed * w.dt)) + 1, progress)
+    state = w.wall_state(wall)
+    if w.wall_kind(wall) == "cylinder":
+        w.set_wall_radius(wall, state["radius"] + distance)
+    else:  # a plane's normal points into the pellet: clear is against it
+        w.set_wall_point(wall, np.asarray(state["point"]) - distance * np.asarray(state["normal"]))
+    return RunOutcome("cleared at once", 0, float(w.time))
+
+
 def unload(pellet: Pellet, speed: Optional[float] = None, progress: Optional[bool] = None) -> StageResult:
     """Piston back up at `speed` (m/s) until it carries no load, then clear of the pellet.
 
@@ -402,8 +373,7 @@ def unload(pellet: Pellet, speed: Optional[float] = None, progress: Optional[boo
     h_release, t_release = float(w.wall_state(pid)["point"][2]), float(w.time)
     calmed = calm(w)
     # Adhesion can hold the piston a little longer; lift it clear by two radii.
-    clear = int(2.0 * pellet.preset.radius_max / (v * w.dt)) + 1
-    out2 = _run(pellet, "unload (clear)", clear, progress)
+    out2 = _clear(pellet, pid, "unload (clear)", 2.0 * pellet.preset.radius_max, v, progress)
     _close_series(w)
     w.set_wall_velocity(pid, (0.0, 0.0, 0.0))
     w.set_wall_active(pid, False)
@@ -436,8 +406,7 @@ def demould(pellet: Pellet, rate: Optional[float] = None, progress: Optional[boo
     out = _run(pellet, "demould", budget, progress, wall_force_below=(mid, 1e-4 * f_start))
     r_release = float(w.wall_state(mid)["radius"])
     calmed = calm(w)
-    clear = int(4.0 * pellet.preset.radius_max / (rate * w.dt)) + 1
-    out2 = _run(pellet, "demould (clear)", clear, progress)
+    out2 = _clear(pellet, mid, "demould (clear)", 4.0 * pellet.preset.radius_max, rate, progress)
     _close_series(w)
     w.set_wall_radius_rate(mid, 0.0)
     w.set_wall_active(mid, False)
@@ -478,7 +447,7 @@ def relax(pellet: Pellet, ke_threshold: Optional[float] = None, max_time: Option
     if not (isinstance(tmin, (int, float, np.floating)) and 0.0 <= tmin < tmax):
         raise ParameterError(f"min_time = {tmin!r} s is out of range: allowed 0 <= min_time < max_time = {tmax} s")
     w = pellet.world
-    _release_damping(pellet, True)
+    release_damping(pellet, True)
     max_steps = int(tmax / w.dt) + 1
     min_steps = int(tmin / w.dt)
     _sample_every(pellet, max_steps / 4)
@@ -521,7 +490,7 @@ def bond(pellet: Pellet, law: BondLaw, ramp_time: Optional[float] = None,
     tr = _check_positive("ramp_time", pellet.preset.bond_ramp_time if ramp_time is None else ramp_time, "s")
     w = pellet.world
     core_law = law.to_core()  # validates before any work
-    _preset_law(pellet)  # the relaxation's damping off; the bonds take its moisture content
+    preset_law(pellet)  # the relaxation's damping off; the bonds take its moisture content
     n_bonds = w.create_bonds(core_law)
     w.set_adhesion_ramp(w.time, tr)
     steps = int(2.0 * tr / w.dt) + 1
@@ -596,7 +565,7 @@ def diametral(pellet: Pellet, speed: Optional[float] = None, max_dLD: Optional[f
     lo, hi = pellet.walls["plate_low"], pellet.walls["plate_high"]
     w.set_wall_crushable(lo, True)  # effects acting under the plates act here only
     w.set_wall_crushable(hi, True)
-    _preset_law(pellet)
+    preset_law(pellet)
     w.set_load_walls([lo, hi])
     w.set_wall_velocity(lo, (0.0, 0.5 * v, 0.0))
     w.set_wall_velocity(hi, (0.0, -0.5 * v, 0.0))
