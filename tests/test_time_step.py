@@ -190,3 +190,35 @@ def test_stiff_bonds_are_refused_when_made_and_the_world_left_unbonded():
     assert w.bonds()["i"].size == 0
     assert w.create_bonds(pd.BondLaw().to_core()) == 1  # Table 4/5's bonds: the step holds
     assert len([s for s in w.time_step_springs() if s["what"].startswith("a bond")]) == 3
+
+
+def test_a_bond_made_stiffer_afterwards_is_refused_before_the_next_step():
+    w = _world(frictionless(1e5, 4e5), dt=2e-6, density_scale=1e4, n=2)
+    w.set_positions(w.x - np.array([[-1e-6, 0, 0], [1e-6, 0, 0]]))
+    assert w.create_bonds(pd.BondLaw().to_core()) == 1
+    w.step()
+    w.set_bond_property("kn", [1e20])  # N/m^3: a bond far stiffer than the step can hold
+    for advance in (w.step, lambda: w.run(1)):
+        with pytest.raises(pd.ParameterError, match=r"above the stable time step.* a bond with its contact: axial"):
+            advance()
+    w.set_bond_property("kn", [1e9])
+    w.step()
+
+
+def test_the_loops_runs_get_a_stable_step_and_keep_their_bed():
+    """A run whose law the preset's dt cannot hold (unloading_growth 10 on `tiny`: k2 (1 + 10 x
+    2 x 1.5) = 31 k2) gets the stable step, rounded down, for its stages and settles its bed
+    at the preset's: the same bed as the base law's, to the bit; a law the dt holds keeps it."""
+    from pelletdem import runs
+
+    base = runs.make_spec(preset="tiny").preset
+    stiff = runs.make_spec({"contact.unloading_growth": 10.0}, preset="tiny").preset
+    assert base.dt == 2e-6 and base.fill_dt == 0.0
+    assert stiff.fill_dt == 2e-6 and stiff.dt < 2e-6
+    assert stiff.dt <= stages.stable_time_step(stiff) < 1.1 * stiff.dt
+    stages.check_time_step(stiff)  # its stages hold the step
+    with pytest.raises(pd.ParameterError, match=r"unloading_growth x the largest overlap"):
+        stages.check_time_step(stiff.with_(dt=2e-6, fill_dt=0.0))
+    beds = [stages.fill(p, seed=3, progress=False)[0].world for p in (base, stiff)]
+    np.testing.assert_array_equal(beds[0].x, beds[1].x)
+    assert beds[1].dt == stiff.dt

@@ -97,7 +97,10 @@ void World::check_guards() {
                            "target stress, or time step too large"));
 }
 
-void World::step() { advance(false); }
+void World::step() {
+  if (guard_stale_) validate_time_step();
+  advance(false);
+}
 
 void World::advance(bool defer) {
   const long n = static_cast<long>(p_.size());

@@ -105,6 +105,7 @@ void World::load_state(const WorldState& s) {
   load_peak_ = s.load_peak;
   load_smoothing_ = s.load_smoothing;
   load_smoothed_ = s.load_smoothed;
+  guard_stale_ = true;  // masses and bonds are the state's: the time step is checked before a step
   samples_.clear();
   // A list built where the saved one was (or, without those positions, at the saved ones: it
   // then holds every pair in contact, but the bonded pairs' forces may add up in another

@@ -17,7 +17,7 @@ double verlet_limit(double k_eff, double m, double zeta) {
   return 2.0 / std::sqrt(k_eff / m) * (std::sqrt(1.0 + zeta * zeta) - zeta);
 }
 
-// k * v as " = <k> N/m" for the springs' descriptions.
+// A spring's description with its stiffness: "<what> = <k> N/m".
 std::string valued(const std::string& what, double k) { return cat(what, " = ", k, " N/m"); }
 
 }  // namespace
@@ -56,7 +56,8 @@ std::vector<TimeStepSpring> World::time_step_springs() const {
   // sqrt(k2 / k) on a spring k; the tangential dashpot of eq. 10 is damping_factor sqrt(m* k_t),
   // against the spin-coupled mass m* / 3.5.
   const auto zeta_n = [&](double k) { return c.normal_damping_ratio * std::sqrt(c.k2 / k); };
-  const double zeta_t = law_.damping_factor() * std::sqrt(3.5) / 2.0;
+  // (from the law's own restitution, so that a law being set is checked with its own)
+  const double zeta_t = HystereticLaw(c).damping_factor() * std::sqrt(3.5) / 2.0;
   const auto add = [&](const std::string& what, double k, double k_eff, double zeta) {
     out.push_back({what, k, k_eff, zeta, verlet_limit(k_eff, m_min, zeta)});
   };
@@ -89,34 +90,41 @@ std::vector<TimeStepSpring> World::time_step_springs() const {
     add(valued("a bond with its contact: axial E_b A / (r_i + r_j) + the normal " + unload.what,
                axial + s_r * unload.k),
         axial + s_r * unload.k, 2.0 * (axial + s_r * unload.k), zeta_n(unload.k));
-    add(valued("a bond with its contact: shear kt_ratio E_b A / (r_i + r_j) + the contact's k_t",
-               shear + s_r * tangential.k),
-        shear + s_r * tangential.k, 2.0 * 3.5 * (shear + s_r * tangential.k), 0.0);
+    // the contact's tangential dashpot acts beside the bond: its ratio on the sum
+    const double k_shear = shear + s_r * tangential.k;
+    add(valued("a bond with its contact: shear kt_ratio E_b A / (r_i + r_j) + the contact's k_t", k_shear),
+        k_shear, 2.0 * 3.5 * k_shear, zeta_t * std::sqrt(s_r * tangential.k / k_shear));
     add(cat("a bond: bending and twisting, 5 K / r_min^2 with K = ", turn, " N m"),
         5.0 * turn / (r_min * r_min), 5.0 * turn / (r_min * r_min), 0.0);
   }
   return out;
 }
 
+const TimeStepSpring* World::stiffest(const std::vector<TimeStepSpring>& springs) {
+  const TimeStepSpring* out = nullptr;
+  for (const TimeStepSpring& s : springs)
+    if (!out || s.dt_limit < out->dt_limit) out = &s;
+  return out;
+}
+
 double World::critical_time_step() const {
-  double dtc = HUGE_VAL;
-  for (const TimeStepSpring& s : time_step_springs()) dtc = std::min(dtc, s.dt_limit);
-  return dtc;
+  const std::vector<TimeStepSpring> springs = time_step_springs();
+  const TimeStepSpring* s = stiffest(springs);
+  return s ? s->dt_limit : HUGE_VAL;
 }
 
 void World::validate_time_step() const {
   const std::vector<TimeStepSpring> springs = time_step_springs();
-  const TimeStepSpring* stiffest = nullptr;
-  for (const TimeStepSpring& s : springs)
-    if (!stiffest || s.dt_limit < stiffest->dt_limit) stiffest = &s;
-  if (!stiffest) return;
-  const double allowed = kTimeStepSafety * stiffest->dt_limit;
-  if (params_.dt > allowed)
-    throw ParameterError(cat("dt = ", params_.dt, " s is above the stable time step: allowed 0 < dt <= ",
-                             allowed, " s, ", kTimeStepSafety, " of the stability limit ", stiffest->dt_limit,
-                             " s of the stiffest spring the laws can reach, ", stiffest->what,
-                             " (on the lightest particle; see World.time_step_springs()). Lower dt, or raise "
-                             "density_scale"));
+  const TimeStepSpring* s = stiffest(springs);
+  if (s && params_.dt > kTimeStepSafety * s->dt_limit)
+    throw ParameterError(
+        cat("dt = ", params_.dt, " s is above the stable time step: allowed 0 < dt <= ",
+            kTimeStepSafety * s->dt_limit, " s, ", kTimeStepSafety, " of the stability limit ", s->dt_limit,
+            " s of the stiffest spring the laws can reach, ", s->what,
+            " (on the lightest particle; see World.time_step_springs()). Lower dt, or soften "
+            "that spring (one that grows with overlap also by a lower max_overlap_ratio), or "
+            "raise density_scale"));
+  guard_stale_ = false;
 }
 
 }  // namespace pelletdem

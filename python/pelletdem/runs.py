@@ -36,6 +36,7 @@ from ._version import __version__
 from .effects import EFFECTS
 from .engine import BondLaw, ContactLaw, k1_from_yield_strength
 from .presets import Preset, get_preset
+from .stage_laws import with_stable_time_step
 
 __all__ = [
     "PARAMETERS", "SCAN_ONLY_PARAMETERS", "CACHE_FORMAT", "RunSpec", "make_spec", "cache_key",
@@ -100,7 +101,7 @@ def canonical(v, where: str = "value"):
 
 _FINGERPRINT: Optional[str] = None
 _FINGERPRINT_FILES = ("engine.py", "laws.py", "world.py", "checks.py", "caliper.py", "pellet_measures.py", "stages.py",
-                      "pipeline.py", "presets.py")
+                      "stage_laws.py", "pipeline.py", "presets.py")
 
 
 def engine_fingerprint() -> str:
@@ -290,6 +291,7 @@ def make_spec(params: Optional[Mapping[str, float]] = None, *, preset="tiny", si
         ratio = p.contact.k2 / p.contact.k1
         p = p.with_(contact=dataclasses.replace(p.contact, k1=k1, k2=k1 * ratio))
     p.contact.to_core()  # validates (ParameterError is a ValueError)
+    p = with_stable_time_step(p)  # a law's springs the preset's dt cannot hold get a stable step
     sz = check_positive("sigma_z", params.get("sigma_z", sigma_z), "Pa")
     seed = params.get("seed", seed)
     law = None

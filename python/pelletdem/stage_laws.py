@@ -9,6 +9,8 @@ from __future__ import annotations
 
 from dataclasses import replace
 
+import numpy as np
+
 
 def release_damping(pellet, on: bool) -> None:
     """Switch the preset's release damping on (demould, relax) or back to the law's own."""
@@ -58,14 +60,62 @@ def fill_law(law):
     return _effects_off(compaction_law(law), "compaction")
 
 
-def check_time_step(world, preset) -> None:
-    """Refuse the preset's dt before the bed settles if the law of a later stage would make it
-    unstable (World's time step guard): the fill's law leaves the compaction and diametral
-    effects off, and the release stages add their damping, so the fill alone would pass a
-    step that the compaction then refuses, after the fill's work."""
-    own = world.contact_law
+def _stage_laws(preset) -> list:
+    """Every contact law the stages put in force, in order: the fill's, the compaction's, the
+    compaction's with the release damping (demould, relax), the preset's whole law."""
     compaction = compaction_law(preset.contact)
     damping = max(preset.release_damping_ratio, preset.contact.normal_damping_ratio)
-    for later in (compaction, replace(compaction, normal_damping_ratio=damping), preset.contact):
-        world.set_contact_law(later)
-    world.set_contact_law(own)
+    return [fill_law(preset.contact), compaction, replace(compaction, normal_damping_ratio=damping), preset.contact]
+
+
+def _lightest_particle(preset, dt: float):
+    """A world holding one particle of the preset's smallest radius (radius_min): the
+    lightest the preset's radii allow, on which the time step guard is strictest."""
+    from .engine import World
+
+    r = preset.radius_min
+    world = World(dt=dt, box=((-2 * r, -2 * r, -2 * r), (2 * r, 2 * r, 2 * r)), contact=fill_law(preset.contact),
+                  density=preset.density, density_scale=preset.density_scale, gravity=(0.0, 0.0, 0.0),
+                  max_overlap_ratio=preset.max_overlap_ratio)
+    world.add_particles(np.zeros((1, 3)), np.array([r]))
+    return world
+
+
+def stable_time_step(preset) -> float:
+    """The largest dt (s) that the law of every stage accepts (World.max_time_step on the
+    lightest particle the preset's radii allow)."""
+    world = _lightest_particle(preset, 1e-15)
+    out = []
+    for law in _stage_laws(preset):
+        world.set_contact_law(law)
+        out.append(world.max_time_step())
+    return min(out)
+
+
+def check_time_step(preset) -> None:
+    """Refuse the preset's dt (ParameterError naming the stiffest spring) if the law of any
+    stage would make it unstable, before any work: World's time step guard on the lightest
+    particle the preset's radii allow (radius_min), with each stage's law in turn. The fill's
+    law leaves the compaction and diametral effects off and the release stages add their
+    damping, so a world checked with the fill's law alone would pass a step that the
+    compaction then refuses, after the fill's work."""
+    world = _lightest_particle(preset, preset.dt)
+    for law in _stage_laws(preset)[1:]:
+        world.set_contact_law(law)
+    if preset.fill_dt > 0.0:  # the bed settles at its own step, under its own law
+        world.set_contact_law(fill_law(preset.contact))
+        world.dt = preset.fill_dt
+
+
+def with_stable_time_step(preset):
+    """``preset``, or where a stage's law cannot hold its dt, a copy whose dt is the stable
+    step rounded down to two digits and whose bed settles at the old dt (``fill_dt``, which
+    the fill's law holds): the same bed, the stages after it at a step their springs allow.
+    The calibration and the loop make their runs with it, so that a fit whose box reaches
+    stiff springs (saturating_unloading's k_p, unloading_growth at its top) runs them stably
+    instead of failing or running unstably."""
+    allowed = stable_time_step(preset)
+    if preset.dt <= allowed:
+        return preset
+    digits = 10.0 ** (np.floor(np.log10(allowed)) - 1)
+    return preset.with_(dt=float(np.floor(allowed / digits) * digits), fill_dt=preset.fill_dt or preset.dt)

@@ -25,7 +25,14 @@ from .pellet_measures import (
     measure,
 )
 from .presets import Preset
-from .stage_laws import check_time_step, compaction_law, fill_law, preset_law, release_damping  # noqa: F401
+from .stage_laws import (  # noqa: F401
+    check_time_step,
+    compaction_law,
+    fill_law,
+    preset_law,
+    release_damping,
+    stable_time_step,
+)
 
 
 @dataclass
@@ -194,6 +201,7 @@ def fill(preset: Preset, seed: int = 0, threads: int = 1, n_particles: Optional[
     n = preset.n_particles if n_particles is None else n_particles
     if not (isinstance(n, (int, np.integer)) and 1 <= n <= 10_000_000):
         raise ParameterError(f"n_particles = {n!r} is out of range: allowed 1 <= n_particles <= 1e7")
+    check_time_step(preset)  # before the packing is made
     R = 0.5 * preset.mould_diameter
     radii = truncated_normal_radii(n, preset.radius_mean, preset.radius_sd, preset.radius_min,
                                    preset.radius_max, seed=seed)
@@ -216,7 +224,6 @@ def fill(preset: Preset, seed: int = 0, threads: int = 1, n_particles: Optional[
         "mould": world.add_cylinder("mould", (0.0, 0.0, 0.0), R),
         "piston": world.add_plane("piston", (0.0, 0.0, fill_height + 2.0 * preset.radius_max), (0.0, 0.0, -1.0)),
     }
-    check_time_step(world, preset)
     masses = np.array(world.m)  # a copy: sort_particles below refuses while views are alive
     pellet = Pellet(world, preset, walls, R, float(masses.sum() / preset.density_scale))
     # Free fall of the bed under g takes sqrt(2 h / g); allow four times that.
@@ -337,11 +344,12 @@ def _compaction_done(pellet: Pellet, sigma_z: float, v: float, reached: bool, st
         wall_time_s=time.perf_counter() - t0, steps=steps)
 
 
-def _clear(pellet: Pellet, wall: int, name: str, distance: float, speed: float, progress):
-    """Move an unloaded `wall` (the piston or the mould) `distance` (m) further out: stepped
-    at `speed` (m/s) as it moves, or at once with the preset's clear_at_once. Returns the run."""
+def _clear(pellet: Pellet, wall: int, name: str, distance: float, speed: float, released: bool, progress):
+    """Move `wall` (the piston or the mould) `distance` (m) further out: stepped at `speed`
+    (m/s) as it moves, or, with the preset's clear_at_once and the wall `released` (it carries
+    no load), at once. Returns the run."""
     w = pellet.world
-    if not pellet.preset.clear_at_once:
+    if not (pellet.preset.clear_at_once and released):  # a loaded wall let go at once bursts the pellet
         return _run(pellet, name, int(distance / (speed * w.dt)) + 1, progress)
     state = w.wall_state(wall)
     if w.wall_kind(wall) == "cylinder":
@@ -373,7 +381,8 @@ def unload(pellet: Pellet, speed: Optional[float] = None, progress: Optional[boo
     h_release, t_release = float(w.wall_state(pid)["point"][2]), float(w.time)
     calmed = calm(w)
     # Adhesion can hold the piston a little longer; lift it clear by two radii.
-    out2 = _clear(pellet, pid, "unload (clear)", 2.0 * pellet.preset.radius_max, v, progress)
+    out2 = _clear(pellet, pid, "unload (clear)", 2.0 * pellet.preset.radius_max, v,
+                  out.reason == "wall_force_below", progress)
     _close_series(w)
     w.set_wall_velocity(pid, (0.0, 0.0, 0.0))
     w.set_wall_active(pid, False)
@@ -406,7 +415,8 @@ def demould(pellet: Pellet, rate: Optional[float] = None, progress: Optional[boo
     out = _run(pellet, "demould", budget, progress, wall_force_below=(mid, 1e-4 * f_start))
     r_release = float(w.wall_state(mid)["radius"])
     calmed = calm(w)
-    out2 = _clear(pellet, mid, "demould (clear)", 4.0 * pellet.preset.radius_max, rate, progress)
+    out2 = _clear(pellet, mid, "demould (clear)", 4.0 * pellet.preset.radius_max, rate,
+                  out.reason == "wall_force_below", progress)
     _close_series(w)
     w.set_wall_radius_rate(mid, 0.0)
     w.set_wall_active(mid, False)

@@ -21,7 +21,7 @@
 namespace pelletdem {
 
 // One spring a law can produce: its largest stiffness and what sets it, in the parameters'
-// names, for the time step guard and its messages (World::time_step_limit).
+// names, for the time step guard and its messages (World::time_step_springs).
 struct Spring {
   double k;          // N/m
   std::string what;  // e.g. "k_p = plastic_stiffness_ratio x k2"
@@ -89,7 +89,11 @@ struct ContactEffect {
   }
   // The loading branch's steepest tangent dF/d(delta) (N/m) up to overlap x_max r*, given the
   // law's so far (`k1`, with the loading_stiffness_factor in it). An effect that shapes the
-  // loading force must report its steepest here.
+  // loading force must report its steepest here. The guard takes a loading tangent steeper
+  // than the unloading stiffness to be followed at the latter: true on loading, and on
+  // unloading where the loading branch is convex or capped (hardening, the crushing cap), so
+  // that a contact that unloads never comes back onto it below its unloading line. A concave
+  // loading branch must report itself as the normal spring instead.
   template <class P>
   static Spring steepest_loading(const P&, Spring k1, double /*x_max*/) {
     return k1;

@@ -114,6 +114,7 @@ class World {
   // For changing bonds' constants: the slots are rebuilt from the records before the next step.
   std::vector<Bond>& bonds_mut() {
     flush_slots();
+    guard_stale_ = true;  // stiffer bonds may lower the stable step: checked before the next step
     slots_live_ = false;
     bond_map_generation_ = -1;
     return bonds_;
@@ -275,6 +276,11 @@ class World {
   void check_guards();
   double effective_skin() const;
   void validate_time_step() const;
+  // The spring with the smallest stability limit (nullptr: no particles), from `springs`.
+  static const TimeStepSpring* stiffest(const std::vector<TimeStepSpring>& springs);
+  // Set where the bonds or the whole state change without a check (bonds_mut, load_state):
+  // step() then checks the time step before it steps (run and run_until always do).
+  mutable bool guard_stale_ = false;
   double r_max_;
 
   WorldParams params_;
