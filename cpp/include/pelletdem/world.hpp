@@ -278,9 +278,6 @@ class World {
   void validate_time_step() const;
   // The spring with the smallest stability limit (nullptr: no particles), from `springs`.
   static const TimeStepSpring* stiffest(const std::vector<TimeStepSpring>& springs);
-  // Set where the bonds or the whole state change without a check (bonds_mut, load_state):
-  // step() then checks the time step before it steps (run and run_until always do).
-  mutable bool guard_stale_ = false;
   double r_max_;
 
   WorldParams params_;
@@ -310,6 +307,10 @@ class World {
   bool list_valid_ = false;
   bool prepared_ = false;  // records packed (step's drift pass) since the last forces
   bool vector_kernels_ = true;
+  // Set where the bonds or the whole state change without a check (bonds_mut, load_state):
+  // step() then checks the time step before it steps (run and run_until always do). Beside
+  // the other flags, in their padding: the members the step reads keep their places.
+  mutable bool guard_stale_ = false;
   double ramp_start_ = 0.0, ramp_duration_ = -1.0;
   double load_peak_from_ = std::numeric_limits<double>::infinity(), load_peak_ = 0.0;
   static constexpr double kInf = std::numeric_limits<double>::infinity();
