@@ -12,14 +12,19 @@ from dataclasses import replace
 import numpy as np
 
 
+def _released(preset, law):
+    """``law`` with the preset's release damping (never below the law's own normal damping)."""
+    return replace(law, normal_damping_ratio=max(preset.release_damping_ratio, preset.contact.normal_damping_ratio))
+
+
 def release_damping(pellet, on: bool) -> None:
     """Switch the preset's release damping on (demould, relax) or back to the law's own."""
     w = pellet.world
     law = w.contact_law
-    ratio = pellet.preset.release_damping_ratio if on else pellet.preset.contact.normal_damping_ratio
-    ratio = max(ratio, pellet.preset.contact.normal_damping_ratio)
-    if law.normal_damping_ratio != ratio:
-        w.set_contact_law(replace(law, normal_damping_ratio=ratio))
+    new = _released(pellet.preset, law) if on else replace(
+        law, normal_damping_ratio=pellet.preset.contact.normal_damping_ratio)
+    if law != new:
+        w.set_contact_law(new)
 
 
 def preset_law(pellet) -> None:
@@ -64,8 +69,7 @@ def _stage_laws(preset) -> list:
     """Every contact law the stages put in force, in order: the fill's, the compaction's, the
     compaction's with the release damping (demould, relax), the preset's whole law."""
     compaction = compaction_law(preset.contact)
-    damping = max(preset.release_damping_ratio, preset.contact.normal_damping_ratio)
-    return [fill_law(preset.contact), compaction, replace(compaction, normal_damping_ratio=damping), preset.contact]
+    return [fill_law(preset.contact), compaction, _released(preset, compaction), preset.contact]
 
 
 def _lightest_particle(preset, dt: float):
